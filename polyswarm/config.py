@@ -1,0 +1,296 @@
+"""One typed, nested configuration object, loaded from TOML and passed explicitly.
+
+Every section is a frozen dataclass; unknown keys are rejected with a "did you mean"
+hint; values are type-checked. The effective configuration is written next to the
+results of every run (``save_config``).
+
+    cfg = load_config("robot.toml")          # or Config() for the defaults
+    cfg = with_overrides(cfg, {"slam": {"keyframe_distance_m": 0.3}})
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from polyswarm.errors import ConfigError
+
+# ---------------------------------------------------------------------------------------
+# Sections
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MapConfig:
+    """PolyMap storage (chapter 3.1 and 4.5 of the thesis)."""
+
+    # Side of the square cells the map is stored on; also the unit of a delta. 2 m was
+    # chosen by `polyswarm bench cells` (merge cost against delta bytes, see README).
+    cell_size_m: float = 2.0
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    """A 2D lidar. Defaults are the thesis simulations' sensor (chapter 5.3)."""
+
+    fov_rad: float = 4.71238898038469  # 270 degrees
+    beams: int = 720
+    range_max_m: float = 30.0
+    range_min_m: float = 0.05
+    rate_hz: float = 10.0
+    noise_sigma_m: float = 0.01  # zero-mean Gaussian range noise
+    dropout_prob: float = 0.0  # probability that a beam returns NaN
+    height_m: float = 0.2  # ray height above the floor in the simulator
+
+
+@dataclass(frozen=True)
+class OdometryNoiseConfig:
+    """Wheel-odometry noise of the simulator, per integration step.
+
+    Variances grow linearly with distance and rotation, so drift does not depend on the
+    integration step: std of the travelled-distance error after d metres is
+    ``trans_sigma_per_sqrt_m * sqrt(d)``.
+    """
+
+    trans_sigma_per_sqrt_m: float = 0.01  # m/sqrt(m): along-track distance error
+    lateral_sigma_per_sqrt_m: float = 0.005  # m/sqrt(m): sideways slip
+    rot_sigma_per_sqrt_rad: float = 0.01  # rad/sqrt(rad): heading error from turning
+    rot_sigma_per_sqrt_m: float = 0.005  # rad/sqrt(m): heading error from driving
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    radius_m: float = 0.2
+    max_linear_mps: float = 0.5
+    max_angular_radps: float = 1.5
+    max_linear_accel_mps2: float = 1.0
+    max_angular_accel_radps2: float = 3.0
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    world: str = "office"
+    seed: int = 0
+    physics_hz: float = 50.0  # fixed integration step of the robots
+    speed: float = 10.0  # simulated seconds per wall-clock second when serving
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    lidar: LidarConfig = field(default_factory=LidarConfig)
+    odometry_noise: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Polygon refinement by line fitting (thesis 3.5, Algorithm 3, formulas 3.5-3.9)."""
+
+    inlier_threshold_m: float = 0.03
+    score_a: float = 1.0
+    score_b: float = 4.0
+    score_c: float = 0.001
+    flat_angle_deg: float = 15.0  # below this, chains meet at a flat angle: no intersection
+    flat_merge_distance_m: float = 0.01  # projections closer than this are averaged
+
+
+@dataclass(frozen=True)
+class IcpConfig:
+    max_iterations: int = 30
+    outlier_start_m: float = 0.5  # initial outlier threshold (thesis Table 5.3: 0.2 - 1.0)
+    outlier_end_m: float = 0.1  # threshold after shrinking
+    shrink: float = 0.75  # threshold multiplied by this every iteration
+    tolerance_m: float = 1e-4  # converged when the update moves points less than this
+    backface_culling: bool = True
+    sample_spacing_m: float = 0.05  # map obstacle vectors sampled at this spacing for search
+    degeneracy_ratio: float = 0.02  # eigenvalue ratio below which an axis is unconstrained
+    map_radius_m: float = 32.0  # obstacle vectors farther than this from the robot are ignored
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    keyframe_distance_m: float = 0.4
+    keyframe_angle_rad: float = 0.3490658503988659  # 20 degrees
+    frontier_range_m: float = 0.2  # invalid beams become frontier points at this range
+    obstacle_max_gap_m: float = 0.5  # consecutive points farther apart become a frontier
+    icp: IcpConfig = field(default_factory=IcpConfig)
+    refine: RefineConfig = field(default_factory=RefineConfig)
+
+
+@dataclass(frozen=True)
+class NavConfig:
+    robot_radius_m: float = 0.2
+    clearance_margin_m: float = 0.02  # extra distance kept from obstacles when planning
+
+
+@dataclass(frozen=True)
+class ExploreConfig:
+    strategy: str = "hungarian"  # hungarian | greedy | nearest
+    min_frontier_length_m: float = 0.4  # shorter frontier segments are not targets
+    blacklist_after_failures: int = 2
+    no_progress_timeout_s: float = 30.0
+    hysteresis: float = 0.8  # a new target must cost less than this times the current one
+    target_separation_m: float = 3.0  # targets of different robots at least this far apart
+
+
+@dataclass(frozen=True)
+class CommsConfig:
+    swarm: str = "default"
+    endpoint: str = "tcp/127.0.0.1:7447"
+    zenoh_config: str = ""  # optional path to a Zenoh JSON5 config file
+
+
+@dataclass(frozen=True)
+class Config:
+    map: MapConfig = field(default_factory=MapConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    slam: SlamConfig = field(default_factory=SlamConfig)
+    nav: NavConfig = field(default_factory=NavConfig)
+    explore: ExploreConfig = field(default_factory=ExploreConfig)
+    comms: CommsConfig = field(default_factory=CommsConfig)
+
+
+# ---------------------------------------------------------------------------------------
+# Loading, validation, saving
+# ---------------------------------------------------------------------------------------
+
+
+def _check_value(value: Any, hint: Any, where: str) -> Any:
+    origin = typing.get_origin(hint)
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{where}: expected a number, got {value!r}")
+        return float(value)
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, got {value!r}")
+        return value
+    if origin in (tuple,):
+        args = typing.get_args(hint)
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_check_value(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
+        if len(args) != len(value):
+            raise ConfigError(f"{where}: expected {len(args)} values, got {len(value)}")
+        return tuple(
+            _check_value(v, a, f"{where}[{i}]")
+            for i, (v, a) in enumerate(zip(args, value, strict=True))
+        )
+    if origin in (types.UnionType, typing.Union):
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        if value is None:
+            return None
+        return _check_value(value, args[0], where)
+    if dataclasses.is_dataclass(hint):
+        return _build(hint, value, where)
+    raise ConfigError(f"{where}: unsupported type {hint}")  # pragma: no cover
+
+
+def _build(cls: type, data: Any, where: str) -> Any:
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where or 'config'}: expected a table, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    kwargs = {}
+    for key, value in data.items():
+        path = f"{where}.{key}" if where else key
+        if key not in names:
+            close = difflib.get_close_matches(key, names, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ConfigError(f"unknown key {path!r}{hint}")
+        kwargs[key] = _check_value(value, hints[key], path)
+    return cls(**kwargs)
+
+
+def _merge_dicts(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _merge_dicts(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def config_to_dict(cfg: Any) -> dict:
+    """The configuration as plain nested dicts (what ``save_config`` writes)."""
+    out = {}
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(v):
+            out[f.name] = config_to_dict(v)
+        elif isinstance(v, tuple):
+            out[f.name] = list(v)
+        else:
+            out[f.name] = v
+    return out
+
+
+def config_from_dict(data: dict, cls: type = Config) -> Any:
+    """Build and validate a configuration; missing keys take their defaults."""
+    cfg = _build(cls, data, "")
+    validate(cfg)
+    return cfg
+
+
+def with_overrides(cfg: Any, overrides: dict) -> Any:
+    """A copy of ``cfg`` with nested ``overrides`` applied and validated."""
+    return config_from_dict(_merge_dicts(config_to_dict(cfg), overrides), type(cfg))
+
+
+def load_config(path: str | Path | None, cls: type = Config) -> Any:
+    """Load a TOML file (``None`` gives the defaults)."""
+    if path is None:
+        return cls()
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text())
+    except FileNotFoundError as e:
+        raise ConfigError(f"config file not found: {p}") from e
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{p}: invalid TOML: {e}") from e
+    try:
+        return config_from_dict(data, cls)
+    except ConfigError as e:
+        raise ConfigError(f"{p}: {e}") from e
+
+
+def save_config(cfg: Any, path: str | Path) -> None:
+    import tomli_w
+
+    Path(path).write_text(tomli_w.dumps(config_to_dict(cfg)))
+
+
+def validate(cfg: Config) -> None:
+    """Range checks that types alone cannot express."""
+    if not isinstance(cfg, Config):
+        return
+    cs = cfg.map.cell_size_m
+    if not (0.1 <= cs <= 100.0) or abs(round(cs * 1000) - cs * 1000) > 1e-6:
+        raise ConfigError(f"map.cell_size_m must be 0.1-100 m in whole millimetres, got {cs}")
+    lid = cfg.sim.lidar
+    if lid.beams < 2 or not (0 < lid.fov_rad <= 6.283185307179586):
+        raise ConfigError("sim.lidar: need at least 2 beams and 0 < fov_rad <= 2 pi")
+    if not (0 < lid.range_min_m < lid.range_max_m):
+        raise ConfigError("sim.lidar: need 0 < range_min_m < range_max_m")
+    if not (0.0 <= lid.dropout_prob < 1.0):
+        raise ConfigError("sim.lidar.dropout_prob must be in [0, 1)")
+    if cfg.sim.robot.radius_m <= 0:
+        raise ConfigError("sim.robot.radius_m must be positive")
+    if cfg.explore.strategy not in ("hungarian", "greedy", "nearest"):
+        raise ConfigError(
+            f"explore.strategy must be hungarian, greedy or nearest, got {cfg.explore.strategy!r}"
+        )
+    if cfg.slam.refine.score_c <= 0:
+        raise ConfigError("slam.refine.score_c must be positive (it avoids a division by zero)")
