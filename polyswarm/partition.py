@@ -1,0 +1,224 @@
+"""Convex partition of a cell's explored space (the role of the BSP in thesis 3.7).
+
+Each cell's explored space (polygons with holes) is triangulated by ear clipping
+(mapbox earcut, which returns vertex *indices*) and the triangles are merged into convex
+pieces by Hertel-Mehlhorn: a diagonal is removed whenever both of its end vertices stay
+convex. The partition keeps its own bookkeeping: every internal split (a sector vector)
+records which two pieces it joins, so the navigation graph never compares coordinates
+to find neighbours (the numerical problem of thesis 4.1). Sector vectors on the cell
+border are joined to the neighbouring cell's pieces by interval overlap along the
+border line, which is known exactly from the cell index (the hyperplane of Algorithm 4).
+
+    part = cell.partition            # cached on the cell
+    k = part.locate(x, y)            # index of the convex piece holding the point
+    part.pieces[k].xy, .types, .links
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mapbox_earcut
+import numpy as np
+import shapely
+
+from polyswarm.polymap import PRECISION_M, UNITS_PER_M, Cell, VectorType
+
+NO_LINK = -1
+
+
+@dataclass(frozen=True, eq=False)
+class Piece:
+    """A convex polygon (counter-clockwise) of typed vectors.
+
+    ``links[i]`` is the index of the piece on the other side of vector i when that vector
+    is an internal split of the cell, else ``NO_LINK``.
+    """
+
+    xy: np.ndarray
+    types: np.ndarray
+    links: np.ndarray
+
+    @property
+    def area(self) -> float:
+        x, y = self.xy[:, 0], self.xy[:, 1]
+        return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+    @property
+    def centroid(self) -> np.ndarray:
+        return self.xy.mean(axis=0)
+
+    def contains(self, x: float, y: float, tol: float = 1e-9) -> bool:
+        a = self.xy
+        b = np.roll(a, -1, axis=0)
+        cross = (b[:, 0] - a[:, 0]) * (y - a[:, 1]) - (b[:, 1] - a[:, 1]) * (x - a[:, 0])
+        return bool(np.all(cross >= -tol))
+
+
+@dataclass(frozen=True, eq=False)
+class CellPartition:
+    pieces: tuple[Piece, ...]
+
+    def locate(self, x: float, y: float) -> int | None:
+        best, best_d = None, np.inf
+        for k, p in enumerate(self.pieces):
+            if p.contains(x, y, tol=1e-9):
+                return k
+            # points on a shared vector may miss both pieces by rounding: take the closest
+            d = _outside_distance(p.xy, x, y)
+            if d < best_d:
+                best, best_d = k, d
+        return best if best_d <= PRECISION_M else None
+
+    def internal_links(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+        """Each internal split once: (piece a, piece b, start, end) with a < b."""
+        out = []
+        for a, p in enumerate(self.pieces):
+            nxt = np.roll(p.xy, -1, axis=0)
+            for i in np.nonzero(p.links > a)[0]:
+                out.append((a, int(p.links[i]), p.xy[i], nxt[i]))
+        return out
+
+
+def _outside_distance(xy: np.ndarray, x: float, y: float) -> float:
+    a = xy
+    b = np.roll(a, -1, axis=0)
+    d = b - a
+    L = np.hypot(d[:, 0], d[:, 1])
+    L = np.where(L > 0, L, 1.0)
+    signed = (d[:, 0] * (y - a[:, 1]) - d[:, 1] * (x - a[:, 0])) / L
+    return float(max(0.0, -signed.min()))
+
+
+def partition_cell(cell: Cell) -> CellPartition:
+    pieces: list[Piece] = []
+    for poly in cell.polygons:
+        pieces.extend(_partition_polygon(poly.rings(), offset=len(pieces)))
+    return CellPartition(tuple(pieces))
+
+
+def _triangulate(xy: np.ndarray, ring_ends: np.ndarray, area: float) -> np.ndarray:
+    tri = mapbox_earcut.triangulate_float64(xy, ring_ends.astype(np.uint32)).reshape(-1, 3)
+    got = _tri_area(xy, tri).sum() if len(tri) else 0.0
+    if abs(got - area) <= 1e-6 * max(1.0, area):
+        return tri
+    # earcut can stumble on holes touching the shell: fall back to GEOS' constrained
+    # Delaunay triangulation, mapping its vertices back to indices on the integer grid
+    rings = np.split(xy, ring_ends[:-1])
+    poly = shapely.Polygon(rings[0], rings[1:])
+    tris = shapely.get_parts(shapely.constrained_delaunay_triangles(poly))
+    q = np.rint(xy * UNITS_PER_M).astype(np.int64)
+    index = {(int(a), int(b)): k for k, (a, b) in enumerate(q)}
+    out = []
+    for t in tris:
+        c = np.rint(shapely.get_coordinates(t)[:3] * UNITS_PER_M).astype(np.int64)
+        try:
+            out.append([index[(int(a), int(b))] for a, b in c])
+        except KeyError:  # pragma: no cover - a Steiner point; cannot happen for CDT
+            continue
+    return np.array(out, dtype=np.int64).reshape(-1, 3)
+
+
+def _tri_area(xy: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    a, b, c = xy[tri[:, 0]], xy[tri[:, 1]], xy[tri[:, 2]]
+    return 0.5 * (
+        (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    )
+
+
+def _partition_polygon(rings, offset: int) -> list[Piece]:
+    xy = np.concatenate([r.xy for r in rings])
+    types = np.concatenate([r.types for r in rings])
+    sizes = [len(r) for r in rings]
+    ends = np.cumsum(sizes)
+    starts = ends - np.array(sizes)
+    area = sum(r.signed_area for r in rings)
+    tri = _triangulate(xy, ends, area)
+    if len(tri) == 0:
+        return []
+    # orient every triangle counter-clockwise
+    flip = _tri_area(xy, tri) < 0
+    tri[flip] = tri[flip][:, ::-1]
+    q = np.rint(xy * UNITS_PER_M).astype(np.int64)  # exact integer geometry for convexity
+    # a hole may touch the shell: vertices at one grid point share one index
+    _, first, inverse = np.unique(q, axis=0, return_index=True, return_inverse=True)
+    canon = first[inverse.ravel()]
+    tri = canon[tri]
+
+    # type of each boundary vector, keyed by its (start, end) vertex indices
+    boundary: dict[tuple[int, int], int] = {}
+    for s, n in zip(starts, sizes, strict=True):
+        for k in range(n):
+            boundary[(int(canon[s + k]), int(canon[s + (k + 1) % n]))] = int(types[s + k])
+
+    # each piece is a cycle stored as next/prev maps over vertex indices
+    nxt: list[dict[int, int]] = []
+    prv: list[dict[int, int]] = []
+    owner: dict[tuple[int, int], int] = {}  # directed edge -> piece
+    for t, (i, j, k) in enumerate(tri.tolist()):
+        nxt.append({i: j, j: k, k: i})
+        prv.append({j: i, k: j, i: k})
+        for e in ((i, j), (j, k), (k, i)):
+            owner[e] = t
+    parent = list(range(len(tri)))
+
+    def find(p: int) -> int:
+        while parent[p] != p:
+            parent[p] = parent[parent[p]]
+            p = parent[p]
+        return p
+
+    def left_turn(a: int, b: int, c: int) -> bool:
+        u, v = q[b] - q[a], q[c] - q[b]
+        return int(u[0]) * int(v[1]) - int(u[1]) * int(v[0]) >= 0
+
+    diagonals = [(u, v) for (u, v) in owner if u < v and (v, u) in owner and (u, v) not in boundary]
+    diagonals.sort(key=lambda e: -float(np.hypot(*(xy[e[1]] - xy[e[0]]))))
+    for u, v in diagonals:
+        P, Q = find(owner[(u, v)]), find(owner[(v, u)])
+        if P == Q:
+            continue
+        # merged cycle: P without u->v, Q without v->u; check convexity at u and v
+        if not (left_turn(prv[P][u], u, nxt[Q][u]) and left_turn(prv[Q][v], v, nxt[P][v])):
+            continue
+        merged_n, merged_p = dict(nxt[P]), dict(prv[P])
+        for a, b in nxt[Q].items():
+            if a == v:
+                continue
+            merged_n[a] = b
+            merged_p[b] = a
+        merged_n[u] = nxt[Q][u]
+        merged_p[nxt[Q][u]] = u
+        merged_n[v] = nxt[P][v]
+        merged_p[nxt[P][v]] = v
+        nxt[P], prv[P] = merged_n, merged_p
+        nxt[Q], prv[Q] = {}, {}
+        parent[Q] = P
+
+    roots = sorted({find(t) for t in range(len(tri))})
+    local = {r: offset + k for k, r in enumerate(roots)}
+    pieces = []
+    for r in roots:
+        start = min(nxt[r])
+        cyc = [start]
+        while (w := nxt[r][cyc[-1]]) != start:
+            cyc.append(w)
+        ety, links = [], []
+        for a, b in zip(cyc, cyc[1:] + cyc[:1], strict=True):
+            if (a, b) in boundary:
+                ety.append(boundary[(a, b)])
+                links.append(NO_LINK)
+            elif (b, a) in owner:  # an internal split: the piece across owns the reverse
+                ety.append(int(VectorType.SECTOR))
+                links.append(local[find(owner[(b, a)])])
+            else:  # pragma: no cover - a degenerate sliver edge: bounds explored space
+                ety.append(int(VectorType.FRONTIER))
+                links.append(NO_LINK)
+        pieces.append(
+            Piece(
+                xy=xy[cyc].copy(),
+                types=np.array(ety, dtype=np.uint8),
+                links=np.array(links, dtype=np.int64),
+            )
+        )
+    return pieces

@@ -1,0 +1,869 @@
+"""PolyMap: explored free space as typed, directed vectors, stored on square cells.
+
+Conventions (see ``protocols/PROTOCOL.md``):
+
+* frame: right-handed, x right / y up, metres;
+* a *vector* is a directed segment with a type (obstacle, frontier, sector);
+* explored free space lies on the LEFT of every vector, so outer rings run
+  counter-clockwise and inner rings (around obstacles inside a cell) clockwise;
+* every vertex lies on a 10 micrometre precision grid (``PRECISION_M``); set operations
+  round to that grid (GEOS snap rounding as the fallback), never exact float tests. The
+  grid is fine enough that merging keyframes in any order gives the same explored area
+  within 1e-6 relative, and coarse enough to absorb floating-point noise;
+* the map is a ``GridPolyMap``: a grid of square cells, each holding the explored
+  space inside its square as closed simple rings. A vector on a cell border with
+  explored space on the other side is a *sector*; the cell is also the unit of a delta.
+
+Map objects are immutable: ``merge`` returns a new map (and the changed cells), so a
+failed merge can never leave a half-updated map behind.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from enum import IntEnum
+from functools import cached_property
+from types import MappingProxyType
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon, box
+
+from polyswarm.errors import DeltaGapError, InvalidPolygonError, MapError
+
+log = logging.getLogger(__name__)
+
+PRECISION_M = 1e-5  # vertex grid: 10 um, also the quantum of the wire format
+UNITS_PER_M = 100_000  # integer grid units per metre (1 / PRECISION_M, exact)
+MATCH_TOL_M = 1.5 * PRECISION_M  # a vector this close to a source obstacle inherits its type
+BORDER_TOL_M = 1e-6  # a vertex this close to a cell border lies on it (borders are on-grid)
+MIN_AREA_M2 = 1e-9  # polygons smaller than this (30 um square) are rounding slivers
+SLIVER_M = 2 * PRECISION_M  # growth thinner than this is rounding noise, not new space
+
+CellIndex = tuple[int, int]
+
+
+class VectorType(IntEnum):
+    """Type of a directed vector; free space is on its left."""
+
+    OBSTACLE = 0  # the outline of something solid
+    FRONTIER = 1  # explored space ends, unexplored space begins
+    SECTOR = 2  # explored space continues in an adjacent polygon (cell border or split)
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+# ---------------------------------------------------------------------------------------
+# Rings and polygons
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Ring:
+    """A closed ring of typed vectors: vector i runs from ``xy[i]`` to ``xy[(i+1) % n]``."""
+
+    xy: np.ndarray  # (n, 2) float64, metres
+    types: np.ndarray  # (n,) uint8, VectorType of vector i
+
+    def __post_init__(self) -> None:
+        xy = np.array(self.xy, dtype=np.float64).reshape(-1, 2)
+        ty = np.array(self.types, dtype=np.uint8).reshape(-1)
+        if len(ty) != len(xy):
+            raise InvalidPolygonError(f"ring has {len(xy)} vertices but {len(ty)} vector types")
+        object.__setattr__(self, "xy", _readonly(xy))
+        object.__setattr__(self, "types", _readonly(ty))
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    @property
+    def signed_area(self) -> float:
+        x, y = self.xy[:, 0], self.xy[:, 1]
+        return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+    def segments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Start and end points of the ring's vectors."""
+        return self.xy, np.roll(self.xy, -1, axis=0)
+
+    def equals(self, other: Ring) -> bool:
+        return (
+            len(self) == len(other)
+            and np.array_equal(self.xy, other.xy)
+            and np.array_equal(self.types, other.types)
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class TypedPolygon:
+    """A polygon with typed vectors: a counter-clockwise shell and clockwise holes."""
+
+    shell: Ring
+    holes: tuple[Ring, ...] = ()
+
+    @classmethod
+    def from_points(cls, xy, types) -> TypedPolygon:
+        return cls(Ring(xy, types))
+
+    def to_shapely(self) -> Polygon:
+        return Polygon(self.shell.xy, [h.xy for h in self.holes])
+
+    def rings(self) -> tuple[Ring, ...]:
+        return (self.shell, *self.holes)
+
+    def segments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All vectors as (starts, ends, types)."""
+        parts = [r.segments() for r in self.rings()]
+        return (
+            np.concatenate([p[0] for p in parts]),
+            np.concatenate([p[1] for p in parts]),
+            np.concatenate([r.types for r in self.rings()]),
+        )
+
+    def validate(self) -> Polygon:
+        """Check the polygon and return it as shapely; raise ``InvalidPolygonError``."""
+        for k, ring in enumerate(self.rings()):
+            name = "shell" if k == 0 else f"hole {k}"
+            if len(ring) < 3:
+                raise InvalidPolygonError(f"{name} has {len(ring)} vertices, need at least 3")
+            if not np.all(np.isfinite(ring.xy)):
+                raise InvalidPolygonError(f"{name} has NaN or infinite coordinates")
+            if np.any(ring.types > VectorType.SECTOR):
+                raise InvalidPolygonError(f"{name} has an unknown vector type")
+            area = ring.signed_area
+            if area == 0:
+                raise InvalidPolygonError(f"{name} has no area")
+            if not shapely.LinearRing(ring.xy).is_simple:
+                raise InvalidPolygonError(f"{name} is not simple (it crosses itself)")
+            if k == 0 and area <= 0:
+                raise InvalidPolygonError(
+                    "shell is clockwise or has no area: free space must be on the left "
+                    "(counter-clockwise in an x-right/y-up frame)"
+                )
+            if k > 0 and area >= 0:
+                raise InvalidPolygonError(f"{name} must run clockwise (free space on its left)")
+        poly = self.to_shapely()
+        if not poly.is_valid:
+            raise InvalidPolygonError(f"polygon is invalid: {shapely.is_valid_reason(poly)}")
+        return poly
+
+
+# ---------------------------------------------------------------------------------------
+# Cells
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Cell:
+    """Explored space inside one grid cell: polygons of typed rings, plus a version.
+
+    ``version`` is the map version at which the cell last changed; a delta since
+    version v holds exactly the cells with ``version > v``.
+    """
+
+    index: CellIndex
+    size: float
+    polygons: tuple[TypedPolygon, ...]
+    version: int = 0
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        i, j = self.index
+        return (i * self.size, j * self.size, (i + 1) * self.size, (j + 1) * self.size)
+
+    @cached_property
+    def region(self) -> shapely.Geometry:
+        """Explored free space of the cell as a shapely (Multi)Polygon."""
+        return _build_regions([self])[0]
+
+    @cached_property
+    def saturated(self) -> bool:
+        """The whole square is explored and every border is a sector: it cannot change."""
+        if len(self.polygons) != 1 or self.polygons[0].holes:
+            return False
+        ring = self.polygons[0].shell
+        return bool(
+            (ring.types == VectorType.SECTOR).all()
+            and abs(ring.signed_area - self.size * self.size) <= 1e-9 * self.size * self.size
+        )
+
+    @cached_property
+    def obstacle_vectors(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.vectors_of_type(VectorType.OBSTACLE)
+
+    @cached_property
+    def vectors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All vectors of the cell: (starts (n,2), ends (n,2), types (n,))."""
+        if not self.polygons:
+            z = np.zeros((0, 2))
+            return z, z, np.zeros(0, np.uint8)
+        parts = [p.segments() for p in self.polygons]
+        return tuple(_readonly(np.concatenate([p[k] for p in parts])) for k in range(3))
+
+    def vectors_of_type(self, kind: VectorType) -> tuple[np.ndarray, np.ndarray]:
+        s, e, t = self.vectors
+        m = t == kind
+        return s[m], e[m]
+
+    @cached_property
+    def area(self) -> float:
+        return float(self.region.area)
+
+    @property
+    def vector_count(self) -> int:
+        return sum(len(r) for p in self.polygons for r in p.rings())
+
+    @cached_property
+    def partition(self):
+        """Convex pieces of the cell joined by sector vectors (see ``polyswarm.partition``)."""
+        from polyswarm.partition import partition_cell
+
+        return partition_cell(self)
+
+    def same_content(self, other: Cell | None) -> bool:
+        if other is None or len(self.polygons) != len(other.polygons):
+            return False
+        for a, b in zip(self.polygons, other.polygons, strict=True):
+            ra, rb = a.rings(), b.rings()
+            if len(ra) != len(rb) or not all(x.equals(y) for x, y in zip(ra, rb, strict=True)):
+                return False
+        return True
+
+    def with_version(self, version: int) -> Cell:
+        c = Cell(self.index, self.size, self.polygons, version)
+        if "region" in self.__dict__:
+            c.__dict__["region"] = self.__dict__["region"]
+        return c
+
+
+@dataclass(frozen=True)
+class MapDelta:
+    """The cells that changed after ``base_version``, bringing a map to ``version``."""
+
+    cell_size: float
+    base_version: int
+    version: int
+    cells: tuple[Cell, ...]
+
+
+@dataclass(frozen=True)
+class MergeResult:
+    map: GridPolyMap
+    changed: frozenset[CellIndex]
+
+
+# ---------------------------------------------------------------------------------------
+# The map
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class GridPolyMap:
+    """A PolyMap stored on a grid of square cells (thesis 4.5), immutable."""
+
+    cell_size: float = 2.0
+    cells: Mapping[CellIndex, Cell] = field(default_factory=lambda: MappingProxyType({}))
+    version: int = 0
+
+    def __post_init__(self) -> None:
+        if not (self.cell_size > 0 and math.isfinite(self.cell_size)):
+            raise MapError(f"cell size must be positive, got {self.cell_size}")
+        if not isinstance(self.cells, MappingProxyType):
+            object.__setattr__(self, "cells", MappingProxyType(dict(self.cells)))
+
+    # -- construction -------------------------------------------------------------------
+
+    def cell_index(self, x: float, y: float) -> CellIndex:
+        return (math.floor(x / self.cell_size), math.floor(y / self.cell_size))
+
+    def cell_box(self, index: CellIndex) -> Polygon:
+        i, j = index
+        s = self.cell_size
+        return box(i * s, j * s, (i + 1) * s, (j + 1) * s)
+
+    def merge(self, polygon: TypedPolygon) -> MergeResult:
+        """Merge a free-space polygon (a keyframe) into the map.
+
+        Explored space only grows; new explored space over an old frontier removes it;
+        where an obstacle and a frontier coincide the obstacle wins. An invalid polygon
+        raises ``InvalidPolygonError`` and the map is unchanged.
+        """
+        geom = polygon.validate()
+        s, e, t = polygon.segments()
+        obstacle = t == VectorType.OBSTACLE
+        return self._merge_geometry(geom, s[obstacle], e[obstacle])
+
+    @classmethod
+    def from_polygons(
+        cls, polygons: Iterable[TypedPolygon], cell_size: float, version: int = 0
+    ) -> GridPolyMap:
+        """A map holding the union of ``polygons``; every cell gets ``version``."""
+        polygons = list(polygons)
+        if not polygons:
+            return cls(cell_size, {}, version)
+        geoms = [p.validate() for p in polygons]
+        geom = shapely.MultiPolygon(geoms) if len(geoms) > 1 else geoms[0]
+        if not geom.is_valid:  # overlapping polygons: their union is the explored space
+            geom = shapely.union_all(geoms, grid_size=PRECISION_M)
+        segs = [p.segments() for p in polygons]
+        s = np.concatenate([x[0] for x in segs])
+        e = np.concatenate([x[1] for x in segs])
+        obstacle = np.concatenate([x[2] for x in segs]) == VectorType.OBSTACLE
+        merged = cls(cell_size)._merge_geometry(geom, s[obstacle], e[obstacle]).map
+        cells = {k: c.with_version(version) for k, c in merged.cells.items()}
+        return cls(cell_size, cells, version)
+
+    def dissolve(self) -> list[TypedPolygon]:
+        """The explored space as polygons across cell borders (border sectors vanish)."""
+        regions = [c.region for c in self.cells.values() if c.polygons]
+        if not regions:
+            return []
+        union = shapely.union_all(np.array(regions, dtype=object), grid_size=PRECISION_M)
+        polys, owner = _polygon_parts(np.array([union], dtype=object))
+        s, e, _ = self.vectors([VectorType.OBSTACLE])
+        return _typed_polygons(polys, owner, s, e).get(0, [])
+
+    def _merge_geometry(
+        self, geom: shapely.Geometry, src_starts: np.ndarray, src_ends: np.ndarray
+    ) -> MergeResult:
+        shapely.prepare(geom)
+        idxs = self._candidate_cells(geom.bounds)
+        ij = np.array(idxs, dtype=np.float64).reshape(-1, 2) * self.cell_size
+        boxes = shapely.box(
+            ij[:, 0], ij[:, 1], ij[:, 0] + self.cell_size, ij[:, 1] + self.cell_size
+        )
+        touch = shapely.intersects(geom, boxes)
+        idxs = [ix for ix, t in zip(idxs, touch, strict=True) if t]
+        boxes = boxes[touch]
+        inside = shapely.contains_properly(geom, boxes)
+        pieces = boxes.copy()
+        if (~inside).any():
+            pieces[~inside] = _clip_to_cells(geom, boxes[~inside])
+        return self._merge_pieces(idxs, pieces, src_starts, src_ends)
+
+    def merge_cells(self, cells: Iterable[Cell]) -> MergeResult:
+        """Merge cells of another map on the same grid (the union of the two maps)."""
+        cells = [c for c in cells if c.polygons]
+        for c in cells:
+            if abs(c.size - self.cell_size) > 1e-9:
+                raise MapError(f"cell size {c.size} m does not match the map's {self.cell_size} m")
+        if not cells:
+            return MergeResult(self, frozenset())
+        # neighbours are touched too: their border vectors may turn from frontier to sector
+        idxs = sorted({c.index for c in cells} | {n for c in cells for n in _neighbours(c.index)})
+        by_index = {c.index: c for c in cells}
+        pieces = np.array(
+            [by_index[i].region if i in by_index else shapely.Polygon() for i in idxs],
+            dtype=object,
+        )
+        starts = [c.vectors_of_type(VectorType.OBSTACLE)[0] for c in cells]
+        ends = [c.vectors_of_type(VectorType.OBSTACLE)[1] for c in cells]
+        return self._merge_pieces(idxs, pieces, np.concatenate(starts), np.concatenate(ends))
+
+    def _candidate_cells(self, bounds) -> list[CellIndex]:
+        s = self.cell_size
+        minx, miny, maxx, maxy = bounds
+        # cells that merely touch the polygon count too (their border may become a sector)
+        i0, j0 = math.ceil(minx / s) - 1, math.ceil(miny / s) - 1
+        i1, j1 = math.floor(maxx / s), math.floor(maxy / s)
+        if (i1 - i0 + 1) * (j1 - j0 + 1) > 4_000_000:
+            raise InvalidPolygonError("polygon spans more than 4 million cells")
+        return [(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)]
+
+    def _merge_pieces(
+        self,
+        idxs: list[CellIndex],
+        pieces: np.ndarray,
+        src_starts: np.ndarray,
+        src_ends: np.ndarray,
+    ) -> MergeResult:
+        """Union ``pieces[k]`` into cell ``idxs[k]`` and type the resulting vectors."""
+        # saturated cells (whole square explored, all borders sectors) cannot change
+        live = [k for k, i in enumerate(idxs) if not (i in self.cells and self.cells[i].saturated)]
+        if len(live) < len(idxs):
+            idxs = [idxs[k] for k in live]
+            pieces = pieces[live]
+        if not idxs:
+            return MergeResult(self, frozenset())
+        empty = shapely.Polygon()
+        old = np.array(
+            [self.cells[i].region if i in self.cells else empty for i in idxs], dtype=object
+        )
+        regions = _union_snapped(old, pieces)
+        # growth thinner than the precision grid is rounding noise, not new space: this
+        # keeps merging idempotent and stops jitter from producing deltas
+        old_area = shapely.area(old)
+        grew = shapely.area(regions) - old_area
+        maybe = (grew <= shapely.length(old) * SLIVER_M) & ~shapely.is_empty(old) & (grew > 0)
+        if maybe.any():
+            extra = shapely.difference(regions[maybe], old[maybe], grid_size=PRECISION_M)
+            thin = shapely.is_empty(shapely.buffer(extra, -SLIVER_M / 2, quad_segs=1))
+            k = np.nonzero(maybe)[0][thin]
+            regions[k] = old[k]
+        same = (grew <= 0) & ~shapely.is_empty(old)
+        regions[same] = old[same]
+        # nothing explored is ever lost: snap rounding moves a vector by at most half a
+        # grid step, so any larger loss is a bug, and the merge is refused as a whole
+        lost = shapely.area(regions) < old_area - shapely.length(old) * PRECISION_M
+        if lost.any():  # pragma: no cover - defensive
+            raise MapError(
+                f"merge would shrink explored space in cell {idxs[int(np.argmax(lost))]}"
+            )
+        # obstacle sources: the new polygon's obstacle vectors and the old ones of these cells
+        olds = [self.cells[i].obstacle_vectors for i in idxs if i in self.cells]
+        starts = np.concatenate([src_starts.reshape(-1, 2)] + [o[0] for o in olds])
+        ends = np.concatenate([src_ends.reshape(-1, 2)] + [o[1] for o in olds])
+        neighbour_region = {i: r for i, r in zip(idxs, regions, strict=True)}
+        new_cells = _typed_cells(
+            idxs, regions, self.cell_size, starts, ends, neighbour_region, self.cells
+        )
+        version = self.version + 1
+        out = dict(self.cells)
+        changed = set()
+        for ix in idxs:
+            cell = new_cells.get(ix)
+            prev = self.cells.get(ix)
+            if cell is None:
+                if prev is not None:  # pragma: no cover - union never shrinks a region
+                    raise MapError(f"merge would remove explored space in cell {ix}")
+                continue
+            if cell.same_content(prev):
+                continue
+            out[ix] = cell.with_version(version)
+            changed.add(ix)
+        if not changed:
+            return MergeResult(self, frozenset())
+        return MergeResult(GridPolyMap(self.cell_size, out, version), frozenset(changed))
+
+    # -- deltas -------------------------------------------------------------------------
+
+    def delta_since(self, version: int) -> MapDelta:
+        """All cells changed after ``version`` (the whole map for version -1)."""
+        cells = tuple(c for c in self.cells.values() if c.version > version)
+        return MapDelta(self.cell_size, version, self.version, cells)
+
+    def apply_delta(self, delta: MapDelta) -> GridPolyMap:
+        """Replace the delta's cells. A delta based on a newer version raises DeltaGapError."""
+        if abs(delta.cell_size - self.cell_size) > 1e-9:
+            raise MapError(
+                f"delta cell size {delta.cell_size} m does not match the map's {self.cell_size} m"
+            )
+        if delta.base_version > self.version:
+            raise DeltaGapError(
+                f"delta applies to version {delta.base_version}, map is at {self.version}"
+            )
+        if delta.version <= self.version:
+            return self
+        out = dict(self.cells)
+        for c in delta.cells:
+            out[c.index] = c
+        return GridPolyMap(self.cell_size, out, delta.version)
+
+    # -- queries ------------------------------------------------------------------------
+
+    def is_free(self, x: float, y: float) -> bool:
+        """Is the point in explored free space (on a vector counts as inside)?"""
+        cell = self.cells.get(self.cell_index(x, y))
+        return cell is not None and bool(shapely.intersects_xy(cell.region, x, y))
+
+    def is_free_many(self, xy: np.ndarray) -> np.ndarray:
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        out = np.zeros(len(xy), dtype=bool)
+        ij = np.floor(xy / self.cell_size).astype(np.int64)
+        keys, inv = np.unique(ij, axis=0, return_inverse=True)
+        for k, (i, j) in enumerate(keys):
+            cell = self.cells.get((int(i), int(j)))
+            if cell is None:
+                continue
+            m = inv.ravel() == k
+            out[m] = shapely.intersects_xy(cell.region, xy[m, 0], xy[m, 1])
+        return out
+
+    def locate(self, x: float, y: float) -> tuple[CellIndex, int] | None:
+        """The cell and the index of the convex piece holding the point, or None."""
+        ix = self.cell_index(x, y)
+        cell = self.cells.get(ix)
+        if cell is None:
+            return None
+        piece = cell.partition.locate(x, y)
+        return None if piece is None else (ix, piece)
+
+    def vectors(
+        self, kinds: Iterable[VectorType] | None = None, cells: Iterable[CellIndex] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All vectors (starts, ends, types), optionally filtered by type and cells."""
+        src = (
+            self.cells.values()
+            if cells is None
+            else [self.cells[c] for c in cells if c in self.cells]
+        )
+        parts = [c.vectors for c in src if c.polygons]
+        if not parts:
+            z = np.zeros((0, 2))
+            return z, z, np.zeros(0, np.uint8)
+        s, e, t = (np.concatenate([p[k] for p in parts]) for k in range(3))
+        if kinds is not None:
+            m = np.isin(t, [int(k) for k in kinds])
+            s, e, t = s[m], e[m], t[m]
+        return s, e, t
+
+    def cells_within(self, x: float, y: float, radius: float) -> list[CellIndex]:
+        s = self.cell_size
+        i0, i1 = math.floor((x - radius) / s), math.floor((x + radius) / s)
+        j0, j1 = math.floor((y - radius) / s), math.floor((y + radius) / s)
+        if (i1 - i0 + 1) * (j1 - j0 + 1) > 4 * len(self.cells) + 16:
+            return [c for c in self.cells if i0 <= c[0] <= i1 and j0 <= c[1] <= j1]
+        return [
+            (i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1) if (i, j) in self.cells
+        ]
+
+    def nearest_obstacle_distance(self, x: float, y: float, max_distance: float = 10.0) -> float:
+        """Distance (m) to the nearest obstacle vector; ``inf`` if none within max_distance."""
+        s, e, _ = self.vectors([VectorType.OBSTACLE], self.cells_within(x, y, max_distance))
+        if len(s) == 0:
+            return math.inf
+        d = float(point_segment_distance(np.array([x, y]), s, e).min())
+        return d if d <= max_distance else math.inf
+
+    # -- statistics ---------------------------------------------------------------------
+
+    def explored_area(self) -> float:
+        return float(sum(c.area for c in self.cells.values()))
+
+    def explored_region(self) -> shapely.Geometry:
+        """The whole explored free space as one shapely geometry (for metrics)."""
+        regions = [c.region for c in self.cells.values() if c.polygons]
+        if not regions:
+            return shapely.Polygon()
+        return shapely.union_all(regions, grid_size=PRECISION_M)
+
+    def vector_counts(self) -> dict[str, int]:
+        _, _, t = self.vectors()
+        return {k.name.lower(): int(np.sum(t == k)) for k in VectorType}
+
+    def polygon_count(self) -> int:
+        return sum(len(c.polygons) for c in self.cells.values())
+
+    def ring_count(self) -> int:
+        return sum(len(p.rings()) for c in self.cells.values() for p in c.polygons)
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        if not self.cells:
+            return (0.0, 0.0, 0.0, 0.0)
+        b = np.array([c.region.bounds for c in self.cells.values() if c.polygons])
+        return (
+            float(b[:, 0].min()),
+            float(b[:, 1].min()),
+            float(b[:, 2].max()),
+            float(b[:, 3].max()),
+        )
+
+
+# ---------------------------------------------------------------------------------------
+# Kernels
+# ---------------------------------------------------------------------------------------
+
+
+def _neighbours(ix: CellIndex) -> tuple[CellIndex, ...]:
+    i, j = ix
+    return ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1))
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def point_segment_distance(p: np.ndarray, s: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Distances from point(s) ``p`` (2,) or (n,2) to segments s->e (n,2)."""
+    d = e - s
+    L2 = np.einsum("ij,ij->i", d, d)
+    L2 = np.where(L2 > 0, L2, 1.0)
+    t = np.clip(np.einsum("ij,ij->i", p - s, d) / L2, 0.0, 1.0)
+    q = s + t[:, None] * d
+    return np.hypot(*(p - q).T)
+
+
+def _clip_to_cells(geom: shapely.Geometry, boxes: np.ndarray) -> np.ndarray:
+    """``geom`` clipped to each box and snapped to the precision grid, valid and polygonal.
+
+    GEOS' rectangle clipper is several times faster than a general intersection; its
+    rare invalid outputs (and those of snapping) fall back to a snap-rounded overlay.
+    """
+    bb = shapely.bounds(boxes)
+    out = np.empty(len(boxes), dtype=object)
+    if shapely.get_num_coordinates(geom) > 2000 and len(boxes) > 16:
+        # a large polygon (a converted grid map): clip to columns first, then to cells
+        _, gy0, _, gy1 = geom.bounds
+        for x0 in np.unique(bb[:, 0]):
+            m = np.nonzero(bb[:, 0] == x0)[0]
+            strip = shapely.clip_by_rect(geom, x0, gy0 - 1.0, bb[m[0], 2], gy1 + 1.0)
+            for k in m:
+                out[k] = shapely.clip_by_rect(strip, *bb[k])
+    else:
+        for k, b in enumerate(bb):
+            out[k] = shapely.clip_by_rect(geom, *b)
+    out = shapely.set_precision(_polygonal(out), PRECISION_M, mode="pointwise")
+    bad = ~shapely.is_valid(out)
+    if bad.any():
+        out[bad] = _polygonal(shapely.intersection(geom, boxes[bad], grid_size=PRECISION_M))
+    return out
+
+
+def _union_snapped(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pairwise union of valid on-grid geometries, with the result on the grid.
+
+    A floating-point overlay followed by rounding is fast and almost always valid; the
+    rest go through GEOS snap-rounding (``grid_size``), which is robust but slower.
+    """
+    try:
+        out = shapely.set_precision(shapely.union(a, b), PRECISION_M, mode="pointwise")
+        bad = ~shapely.is_valid(out)
+    except shapely.errors.GEOSException:
+        out, bad = a.copy(), np.ones(len(a), dtype=bool)
+    if bad.any():
+        out[bad] = shapely.union(a[bad], b[bad], grid_size=PRECISION_M)
+    return out
+
+
+def _polygonal(geoms: np.ndarray) -> np.ndarray:
+    """Keep only the polygonal part of each geometry (clipping can add lines and points)."""
+    tid = shapely.get_type_id(geoms)
+    out = geoms.copy()
+    for k in np.nonzero(~np.isin(tid, (3, 6)))[0]:
+        parts = [p for p in shapely.get_parts(geoms[k]) if shapely.get_type_id(p) in (3, 6)]
+        out[k] = shapely.union_all(parts) if parts else shapely.Polygon()
+    return out
+
+
+def _polygon_parts(regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Polygon parts of each geometry (lines and points from touching inputs dropped)."""
+    parts, owner = shapely.get_parts(regions, return_index=True)
+    if len(parts) == 0:
+        return parts, owner
+    tid = shapely.get_type_id(parts)
+    multi = tid == 6  # a GeometryCollection member may itself be a MultiPolygon
+    if multi.any():
+        sub, sub_owner = shapely.get_parts(parts[multi], return_index=True)
+        parts = np.concatenate([parts[~multi], sub])
+        owner = np.concatenate([owner[~multi], owner[multi][sub_owner]])
+        tid = shapely.get_type_id(parts)
+    keep = (tid == 3) & (shapely.area(parts) > MIN_AREA_M2)
+    return shapely.orient_polygons(parts[keep], exterior_cw=False), owner[keep]
+
+
+def _typed_cells(
+    idxs: list[CellIndex],
+    regions: np.ndarray,
+    cell_size: float,
+    src_starts: np.ndarray,
+    src_ends: np.ndarray,
+    new_regions: Mapping[CellIndex, shapely.Geometry],
+    old_cells: Mapping[CellIndex, Cell],
+) -> dict[CellIndex, Cell]:
+    """Turn merged cell regions into cells of canonical typed rings.
+
+    Every vector of a result ring is a piece of some input vector (GEOS keeps input
+    vertices), so its type is inherited: obstacle if it lies along a source obstacle
+    vector (obstacle wins over frontier); else sector if it lies on the cell border with
+    explored space across it; else frontier.
+    """
+    polys, poly_cell = _polygon_parts(regions)
+    cell_ij = np.array(idxs, dtype=np.int64).reshape(-1, 2)
+
+    def sectors(a, b, mid, e_owner, types):
+        ij = cell_ij[e_owner]
+        x0 = ij[:, 0] * cell_size
+        y0 = ij[:, 1] * cell_size
+        on = lambda v, c: np.abs(v - c) <= BORDER_TOL_M  # noqa: E731
+        sides = (
+            on(a[:, 0], x0) & on(b[:, 0], x0),
+            on(a[:, 0], x0 + cell_size) & on(b[:, 0], x0 + cell_size),
+            on(a[:, 1], y0) & on(b[:, 1], y0),
+            on(a[:, 1], y0 + cell_size) & on(b[:, 1], y0 + cell_size),
+        )
+        for side, (di, dj) in zip(sides, ((-1, 0), (1, 0), (0, -1), (0, 1)), strict=True):
+            cand = np.nonzero(side & (types != VectorType.OBSTACLE))[0]
+            if len(cand) == 0:
+                continue
+            geoms = []
+            for i, j in ij[cand].tolist():
+                g = new_regions.get((i + di, j + dj))
+                if g is None:
+                    c = old_cells.get((i + di, j + dj))
+                    g = c.region if c is not None else None
+                geoms.append(g)
+            geoms = np.array(geoms, dtype=object)
+            has = np.array([g is not None for g in geoms], dtype=bool)
+            touch = np.zeros(len(cand), dtype=bool)
+            if has.any():
+                touch[has] = shapely.dwithin(
+                    geoms[has], shapely.points(mid[cand[has]]), BORDER_TOL_M
+                )
+            types[cand[touch]] = VectorType.SECTOR
+
+    out = _typed_polygons(polys, poly_cell, src_starts, src_ends, sectors)
+    cells = [Cell(idxs[k], cell_size, tuple(tp)) for k, tp in out.items() if tp]
+    for c, g in zip(cells, _build_regions(cells), strict=True):
+        c.__dict__["region"] = g  # fill the cached property in one vectorised pass
+    return {c.index: c for c in cells}
+
+
+def _build_regions(cells: list[Cell]) -> list[shapely.Geometry]:
+    """Shapely regions of many cells at once (the same result as one at a time)."""
+    rings = [
+        (k, p, r)
+        for k, c in enumerate(cells)
+        for p, poly in enumerate(c.polygons)
+        for r in poly.rings()
+    ]
+    if not rings:
+        return [shapely.Polygon() for _ in cells]
+    coords = np.concatenate([np.vstack([r.xy, r.xy[:1]]) for _, _, r in rings])
+    ring_idx = np.repeat(np.arange(len(rings)), [len(r) + 1 for _, _, r in rings])
+    lr = shapely.linearrings(coords, indices=ring_idx)
+    keys = [(k, p) for k, p, _ in rings]
+    poly_keys = list(dict.fromkeys(keys))
+    poly_of = {kp: n for n, kp in enumerate(poly_keys)}
+    polys = shapely.polygons(lr, indices=np.array([poly_of[kp] for kp in keys]))
+    out: list[shapely.Geometry] = []
+    n = 0
+    for c in cells:
+        m = len(c.polygons)
+        geom = (
+            polys[n]
+            if m == 1
+            else shapely.MultiPolygon(list(polys[n : n + m]))
+            if m
+            else shapely.Polygon()
+        )
+        n += m
+        shapely.prepare(geom)
+        out.append(geom)
+    return out
+
+
+def _typed_polygons(
+    polys: np.ndarray,
+    owner: np.ndarray,
+    src_starts: np.ndarray,
+    src_ends: np.ndarray,
+    sectors=None,
+) -> dict[int, list[TypedPolygon]]:
+    """Typed, canonical polygons from oriented shapely polygons, grouped by ``owner``.
+
+    Vectors along a source obstacle vector are obstacles; ``sectors(a, b, mid, owner,
+    types)`` may then mark sectors; every other vector is a frontier.
+    """
+    if len(polys) == 0:
+        return {}
+    rings, ring_poly = shapely.get_rings(polys, return_index=True)
+    coords, ring_of = shapely.get_coordinates(rings, return_index=True)
+    # vector k runs from coords[k] to coords[k+1] within one ring (rings are closed)
+    same = ring_of[1:] == ring_of[:-1]
+    a, b = coords[:-1][same], coords[1:][same]
+    e_ring = ring_of[:-1][same]
+    types = np.full(len(a), VectorType.FRONTIER, dtype=np.uint8)
+    mid = 0.5 * (a + b)
+    types[_along_obstacles(a, b, mid, src_starts, src_ends)] = VectorType.OBSTACLE
+    if sectors is not None:
+        sectors(a, b, mid, owner[ring_poly[e_ring]], types)
+
+    # canonical rings: drop zero-length vectors and collinear vertices between vectors
+    # of one type, start each ring at its lowest (x, y) vertex: equal regions give
+    # equal rings, whatever the history of merges
+    q = np.rint(a * UNITS_PER_M).astype(np.int64)
+    keep = _ring_mask(q, e_ring, lambda q, nx, pv: np.any(q != q[nx], axis=1))
+    a, q, types, e_ring = a[keep], q[keep], types[keep], e_ring[keep]
+
+    def straight(q, nx, pv):
+        u, v = q - q[pv], q[nx] - q
+        cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+        dot = u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1]
+        return ~((cross == 0) & (dot > 0) & (types == types[pv]))
+
+    keep = _ring_mask(q, e_ring, straight)
+    a, q, types, e_ring = a[keep], q[keep], types[keep], e_ring[keep]
+    if len(a) == 0:
+        return {}
+    ring_ids, starts_at, counts = np.unique(e_ring, return_index=True, return_counts=True)
+    # rotate each ring to start at its lexicographically lowest vertex
+    order = np.lexsort((q[:, 1], q[:, 0], e_ring))
+    first = order[np.searchsorted(e_ring[order], ring_ids)]
+    s_rep, n_rep = np.repeat(starts_at, counts), np.repeat(counts, counts)
+    local = np.arange(len(a)) - s_rep
+    perm = s_rep + (local + np.repeat(first - starts_at, counts)) % n_rep
+    a, types = a[perm], types[perm]
+    x, y = a[:, 0], a[:, 1]
+    nxt = s_rep + (local + 1) % n_rep
+    area2 = np.add.reduceat(x * y[nxt] - x[nxt] * y, starts_at)
+
+    grouped: dict[int, list[list[Ring]]] = {}
+    shell_slot: dict[int, int] = {}
+    poly_of_ring = ring_poly[ring_ids]
+    for r in range(len(ring_ids)):
+        lo, n = int(starts_at[r]), int(counts[r])
+        if n < 3:
+            continue
+        p = int(poly_of_ring[r])
+        plist = grouped.setdefault(int(owner[p]), [])
+        ring = Ring(a[lo : lo + n], types[lo : lo + n])
+        if p not in shell_slot:  # get_rings lists each polygon's shell first
+            if area2[r] <= 0:  # a collapsed shell: the polygon is a sliver
+                shell_slot[p] = -1
+                continue
+            shell_slot[p] = len(plist)
+            plist.append([ring])
+        elif shell_slot[p] >= 0:
+            plist[shell_slot[p]].append(ring)
+    out = {}
+    for k, plist in grouped.items():
+        tp = [TypedPolygon(rs[0], tuple(sorted(rs[1:], key=_ring_key))) for rs in plist]
+        tp.sort(key=lambda p: _ring_key(p.shell))
+        out[k] = tp
+    return out
+
+
+def _along_obstacles(a, b, mid, src_starts, src_ends) -> np.ndarray:
+    """Vectors a->b lying along a source obstacle vector, in the same direction."""
+    hit = np.zeros(len(a), dtype=bool)
+    if len(src_starts) == 0 or len(a) == 0:
+        return hit
+    tree = shapely.STRtree(shapely.linestrings(np.stack([src_starts, src_ends], axis=1)))
+    k, j = tree.query(shapely.points(mid), predicate="dwithin", distance=MATCH_TOL_M)
+    if len(k) == 0:
+        return hit
+    d = src_ends[j] - src_starts[j]
+    L = np.hypot(d[:, 0], d[:, 1])
+    n = d / np.where(L > 0, L, 1.0)[:, None]
+    da = np.abs(_cross(n, a[k] - src_starts[j]))
+    db = np.abs(_cross(n, b[k] - src_starts[j]))
+    u = b[k] - a[k]
+    lu = np.hypot(u[:, 0], u[:, 1])
+    # same direction within 30 degrees: millimetre-long vectors made by rounding
+    # would otherwise match any nearby obstacle
+    same_dir = np.einsum("ij,ij->i", u, n) >= np.cos(np.radians(30.0)) * lu
+    ok = (L > 0) & (da <= MATCH_TOL_M) & (db <= MATCH_TOL_M) & same_dir & (lu > 0)
+    hit[np.unique(k[ok])] = True
+    return hit
+
+
+def _ring_mask(q: np.ndarray, ring: np.ndarray, rule) -> np.ndarray:
+    """Vertices to keep: ``rule(q, next_index, prev_index)`` per vertex of each ring."""
+    if len(q) == 0:
+        return np.zeros(0, dtype=bool)
+    _, starts, counts = np.unique(ring, return_index=True, return_counts=True)
+    s = np.repeat(starts, counts)
+    n = np.repeat(counts, counts)
+    local = np.arange(len(q)) - s
+    nx = s + (local + 1) % n
+    pv = s + (local - 1) % n
+    return rule(q, nx, pv)
+
+
+def _ring_key(r: Ring) -> tuple[float, float]:
+    return (float(r.xy[0, 0]), float(r.xy[0, 1]))

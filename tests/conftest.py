@@ -1,0 +1,42 @@
+"""Shared fixtures. Tests that read ../shared/data fail (never skip) when it is missing."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, settings
+
+from polyswarm.polymap import Ring, TypedPolygon, VectorType
+
+settings.register_profile(
+    "ci", max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.register_profile(  # HYPOTHESIS_PROFILE=thorough for a long local run
+    "thorough", max_examples=600, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+O, F, S = VectorType.OBSTACLE, VectorType.FRONTIER, VectorType.SECTOR
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    from polyswarm.data import shared_data_dir
+
+    return shared_data_dir()  # raises DataFormatError (a failure) if the folder is missing
+
+
+def rect(x0, y0, x1, y1, types=(O, O, O, O)) -> TypedPolygon:
+    """Axis-aligned rectangle, counter-clockwise from (x0, y0); types bottom, right, top, left."""
+    return TypedPolygon(Ring([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], list(types)))
+
+
+def star(center, radii, types) -> TypedPolygon:
+    """A star-shaped polygon around ``center`` with vertices at even angles."""
+    n = len(radii)
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    xy = np.asarray(center) + np.stack([radii * np.cos(a), radii * np.sin(a)], axis=1)
+    return TypedPolygon(Ring(xy, types))

@@ -1,0 +1,65 @@
+"""Convex partition of cells: convex pieces, exact area, symmetric bookkeeping."""
+
+import numpy as np
+import pytest
+
+from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
+from tests.conftest import O, rect
+
+
+def convex(xy: np.ndarray) -> bool:
+    a, b, c = xy, np.roll(xy, -1, 0), np.roll(xy, -2, 0)
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - b[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - b[:, 0])
+    return bool((cross >= -1e-12).all())
+
+
+def check(pmap: GridPolyMap) -> None:
+    for cell in pmap.cells.values():
+        part = cell.partition
+        assert sum(p.area for p in part.pieces) == pytest.approx(cell.area, abs=1e-9)
+        for k, p in enumerate(part.pieces):
+            assert convex(p.xy)
+            for i in np.nonzero(p.links >= 0)[0]:
+                other = part.pieces[p.links[i]]
+                assert p.types[i] == VectorType.SECTOR
+                assert k in other.links.tolist()  # the split is known from both sides
+
+
+def test_l_shaped_room_splits_into_convex_pieces():
+    ring = Ring([(0.1, 0.1), (1.9, 0.1), (1.9, 0.8), (0.8, 0.8), (0.8, 1.9), (0.1, 1.9)], [O] * 6)
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(ring)).map
+    part = pmap.cells[(0, 0)].partition
+    assert len(part.pieces) == 2
+    check(pmap)
+    assert len(part.internal_links()) == 1
+    _, _, s, e = part.internal_links()[0]
+    # the split starts at the reflex corner (0.8, 0.8)
+    assert np.allclose(s, (0.8, 0.8)) or np.allclose(e, (0.8, 0.8))
+
+
+def test_room_with_a_pillar():
+    outer = Ring([(0.1, 0.1), (1.9, 0.1), (1.9, 1.9), (0.1, 1.9)], [O] * 4)
+    hole = Ring([(0.9, 0.9), (0.9, 1.1), (1.1, 1.1), (1.1, 0.9)], [O] * 4)
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(outer, (hole,))).map
+    check(pmap)
+    part = pmap.cells[(0, 0)].partition
+    assert part.locate(1.0, 1.0) is None  # inside the pillar
+    assert part.locate(0.5, 0.5) is not None
+
+
+def test_random_cells_partition_exactly():
+    rng = np.random.default_rng(3)
+    pmap = GridPolyMap(2.0)
+    for _ in range(20):
+        c = rng.uniform(-3, 3, 2)
+        a = np.sort(rng.uniform(0, 2 * np.pi, 30))
+        r = rng.uniform(0.5, 3.0, 30)
+        xy = c + np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+        pmap = pmap.merge(TypedPolygon(Ring(xy, rng.integers(0, 2, 30)))).map
+    check(pmap)
+
+
+def test_locate_on_a_shared_split_finds_a_piece():
+    pmap = GridPolyMap(2.0).merge(rect(0.5, 0.5, 3.5, 1.5)).map
+    # x = 2.0 is the cell border: either cell may answer, but one must
+    assert pmap.locate(2.0, 1.0) is not None

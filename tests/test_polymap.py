@@ -1,0 +1,246 @@
+"""PolyMap merge, queries and deltas on geometry checkable by hand, plus property tests."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given
+from hypothesis import strategies as st
+
+from polyswarm.errors import DeltaGapError, InvalidPolygonError, MapError
+from polyswarm.polymap import PRECISION_M, GridPolyMap, Ring, TypedPolygon, VectorType
+from tests.conftest import F, O, rect, star
+
+
+def total_length(pmap: GridPolyMap, kind: VectorType) -> float:
+    s, e, _ = pmap.vectors([kind])
+    return float(np.hypot(*(e - s).T).sum())
+
+
+def assert_well_formed(pmap: GridPolyMap) -> None:
+    """Every cell: valid polygons inside the cell, free space on the left of every vector."""
+    for cell in pmap.cells.values():
+        assert cell.region.is_valid
+        x0, y0, x1, y1 = cell.bounds
+        bx = cell.region.bounds
+        assert (
+            bx[0] >= x0 - 1e-9 and bx[1] >= y0 - 1e-9 and bx[2] <= x1 + 1e-9 and bx[3] <= y1 + 1e-9
+        )
+        for poly in cell.polygons:
+            assert poly.shell.signed_area > 0
+            assert all(h.signed_area < 0 for h in poly.holes)
+            for ring in poly.rings():
+                # vertices on the 1 mm grid
+                assert np.allclose(ring.xy, np.rint(ring.xy / PRECISION_M) * PRECISION_M, atol=1e-9)
+                # a point just left of each vector's midpoint is explored
+                a, b = ring.segments()
+                d = b - a
+                L = np.hypot(d[:, 0], d[:, 1])
+                left = 0.5 * (a + b) + 1e-7 * np.stack([-d[:, 1], d[:, 0]], axis=1) / L[:, None]
+                assert shapely.intersects_xy(cell.region, left[:, 0], left[:, 1]).all()
+
+
+# --- merge on hand-checkable geometry ---------------------------------------------------
+
+
+def test_square_across_four_cells_has_known_vectors():
+    pmap = GridPolyMap(2.0).merge(rect(0.5, 0.5, 3.5, 3.5, (O, F, O, F))).map
+    assert sorted(pmap.cells) == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    assert pmap.explored_area() == pytest.approx(9.0)
+    # 3 m of obstacle at the bottom and top, 3 m of frontier left and right,
+    # 4 sector borders of 1.5 m seen from both sides
+    assert total_length(pmap, VectorType.OBSTACLE) == pytest.approx(6.0)
+    assert total_length(pmap, VectorType.FRONTIER) == pytest.approx(6.0)
+    assert total_length(pmap, VectorType.SECTOR) == pytest.approx(12.0)
+    assert_well_formed(pmap)
+
+
+def test_two_overlapping_squares_give_the_union_area():
+    pmap = GridPolyMap(2.0)
+    pmap = pmap.merge(rect(0, 0, 2, 2)).map
+    pmap = pmap.merge(rect(1, 1, 3, 3)).map
+    assert pmap.explored_area() == pytest.approx(7.0)
+    assert_well_formed(pmap)
+
+
+def test_new_explored_space_removes_a_covered_frontier():
+    pmap = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.0, (O, F, O, O))).map
+    assert total_length(pmap, VectorType.FRONTIER) == pytest.approx(0.8)
+    pmap = pmap.merge(rect(0.9, 0.2, 1.8, 1.0, (O, O, O, F))).map
+    assert total_length(pmap, VectorType.FRONTIER) == pytest.approx(0.0)
+    assert total_length(pmap, VectorType.OBSTACLE) == pytest.approx(1.6 + 1.6 + 0.8 + 0.8)
+
+
+def test_obstacle_wins_over_a_coincident_frontier():
+    a = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.0, (F, F, F, F))).map
+    b = a.merge(rect(0.2, 0.2, 1.0, 1.0, (O, F, F, F))).map
+    assert total_length(b, VectorType.OBSTACLE) == pytest.approx(0.8)
+    # and the other way round: a later frontier does not erase an obstacle
+    c = b.merge(rect(0.2, 0.2, 1.0, 1.0, (F, F, F, F)))
+    assert not c.changed
+
+
+def test_merging_the_same_keyframe_twice_changes_nothing():
+    kf = star((1.3, 0.7), np.linspace(1.0, 3.0, 40), [O] * 20 + [F] * 20)
+    r1 = GridPolyMap(2.0).merge(kf)
+    r2 = r1.map.merge(kf)
+    assert not r2.changed and r2.map is r1.map
+
+
+def test_touching_polygons_share_an_edge():
+    pmap = GridPolyMap(2.0).merge(rect(0.3, 0.3, 1.0, 1.0, (O, F, O, O))).map
+    pmap = pmap.merge(rect(1.0, 0.3, 1.7, 1.0, (O, O, O, F))).map
+    assert pmap.explored_area() == pytest.approx(0.98)
+    assert len(pmap.cells[(0, 0)].polygons) == 1  # one region, the shared frontier is gone
+    assert total_length(pmap, VectorType.FRONTIER) == pytest.approx(0.0)
+
+
+def test_nearly_coincident_edges_stay_valid():
+    pmap = GridPolyMap(2.0).merge(rect(0.3, 0.3, 1.0, 1.0)).map
+    for eps in (1e-9, 3e-7, 4e-4, 6e-4):
+        pmap = pmap.merge(rect(1.0 + eps, 0.3 - eps, 1.5, 1.0 + eps)).map
+    assert_well_formed(pmap)
+    assert pmap.explored_area() >= 0.7 * 0.7 + 0.5 * 0.7 - 1e-3
+
+
+def test_a_sliver_thinner_than_the_grid_is_not_a_change():
+    pmap = GridPolyMap(2.0).merge(rect(0.3, 0.3, 1.0, 1.0)).map
+    r = pmap.merge(rect(0.3, 0.3, 1.000004, 1.0))  # 4 um: below the 10 um grid
+    assert not r.changed
+
+
+def test_wall_on_a_cell_border_stays_an_obstacle():
+    # the right edge lies exactly on x = 2.0, the border between cells (0, 0) and (1, 0)
+    pmap = GridPolyMap(2.0).merge(rect(0.5, 0.5, 2.0, 1.5, (F, O, F, F))).map
+    assert list(pmap.cells) == [(0, 0)]
+    assert total_length(pmap, VectorType.OBSTACLE) == pytest.approx(1.0)
+    # free space on the other side of a border becomes a sector on both sides
+    pmap2 = GridPolyMap(2.0).merge(rect(0.5, 0.5, 2.0, 1.5, (F, F, F, F))).map
+    pmap2 = pmap2.merge(rect(2.0, 0.5, 3.0, 1.5, (F, F, F, F))).map
+    assert total_length(pmap2, VectorType.SECTOR) == pytest.approx(2.0)
+    assert total_length(pmap2, VectorType.FRONTIER) == pytest.approx(2 * 2.5 + 2 * 1.0)
+
+
+def test_polygon_with_hole_keeps_the_hole():
+    outer = Ring([(0.1, 0.1), (3.9, 0.1), (3.9, 3.9), (0.1, 3.9)], [O] * 4)
+    hole = Ring([(1.5, 1.5), (1.5, 2.5), (2.5, 2.5), (2.5, 1.5)], [O] * 4)  # clockwise
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(outer, (hole,))).map
+    assert pmap.explored_area() == pytest.approx(3.8 * 3.8 - 1.0)
+    assert not pmap.is_free(2.0, 2.0) and pmap.is_free(1.0, 1.0)
+    assert total_length(pmap, VectorType.OBSTACLE) == pytest.approx(4 * 3.8 + 4.0)
+
+
+@pytest.mark.parametrize(
+    ("xy", "types", "match"),
+    [
+        ([(0, 0), (0, 1), (1, 1), (1, 0)], [O] * 4, "clockwise"),
+        ([(0, 0), (2, 2), (2, 0), (0, 1)], [O] * 4, "not simple"),
+        ([(0, 0), (1, 0)], [O, O], "at least 3"),
+        ([(0, 0), (1, 0), (math.nan, 1)], [O] * 3, "NaN"),
+        ([(0, 0), (1, 0), (2, 0)], [O] * 3, "no area"),
+        ([(0, 0), (1, 0), (1, 1)], [O, O, 7], "unknown vector type"),
+    ],
+)
+def test_invalid_polygons_are_rejected_and_the_map_is_untouched(xy, types, match):
+    pmap = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.0)).map
+    before = dict(pmap.cells)
+    with pytest.raises(InvalidPolygonError, match=match):
+        pmap.merge(TypedPolygon(Ring(xy, types)))
+    assert dict(pmap.cells) == before and pmap.version == 1
+
+
+def test_ring_with_mismatched_types_is_rejected():
+    with pytest.raises(InvalidPolygonError):
+        Ring([(0, 0), (1, 0), (1, 1)], [O, O])
+
+
+# --- queries ---------------------------------------------------------------------------
+
+
+def test_queries_on_a_room():
+    pmap = GridPolyMap(2.0).merge(rect(0, 0, 5, 3, (O, O, O, F))).map
+    assert pmap.is_free(1.0, 1.0) and pmap.is_free(4.9, 2.9)
+    assert not pmap.is_free(5.5, 1.0) and not pmap.is_free(-1.0, 1.0)
+    assert pmap.is_free_many(np.array([[1, 1], [6, 1], [4.5, 0.5]])).tolist() == [True, False, True]
+    # nearest obstacle from (1, 1): the bottom wall at 1 m (left side is a frontier)
+    assert pmap.nearest_obstacle_distance(1.0, 1.0) == pytest.approx(1.0)
+    assert pmap.nearest_obstacle_distance(4.0, 1.5) == pytest.approx(1.0)
+    cell, piece = pmap.locate(3.0, 1.0)
+    assert cell == (1, 0)
+    assert pmap.cells[cell].partition.pieces[piece].contains(3.0, 1.0)
+    assert pmap.locate(7.0, 1.0) is None
+
+
+def test_nearest_obstacle_is_inf_when_none_is_in_range():
+    pmap = GridPolyMap(2.0).merge(rect(0, 0, 1, 1, (F, F, F, F))).map
+    assert pmap.nearest_obstacle_distance(0.5, 0.5) == math.inf
+
+
+# --- deltas ----------------------------------------------------------------------------
+
+
+def test_delta_reproduces_the_map_and_a_gap_is_detected():
+    a = GridPolyMap(2.0).merge(rect(0, 0, 3, 3)).map
+    b = a.merge(rect(2, 2, 6, 5, (O, F, O, F))).map
+    delta = b.delta_since(a.version)
+    assert {c.index for c in delta.cells} <= set(b.cells)
+    copy = a.apply_delta(delta)
+    assert copy.version == b.version
+    assert all(copy.cells[k].same_content(b.cells[k]) for k in b.cells)
+    with pytest.raises(DeltaGapError):
+        GridPolyMap(2.0).apply_delta(b.delta_since(a.version))  # base 1, map at 0
+    with pytest.raises(MapError):
+        GridPolyMap(4.0).apply_delta(delta)
+
+
+# --- properties over random keyframes --------------------------------------------------
+
+
+@st.composite
+def keyframes(draw):
+    """Star-shaped keyframes (like lidar scans) with random obstacle/frontier types."""
+    c = (draw(st.floats(-6, 6)), draw(st.floats(-6, 6)))
+    radii = np.array(draw(st.lists(st.floats(0.3, 5.0), min_size=8, max_size=40)))
+    types = [
+        O if t else F
+        for t in draw(st.lists(st.booleans(), min_size=len(radii), max_size=len(radii)))
+    ]
+    return star(c, radii, types)
+
+
+@given(st.lists(keyframes(), min_size=1, max_size=6), st.sampled_from([1.0, 2.0, 4.0]))
+def test_merge_laws(kfs, cell_size):
+    pmap = GridPolyMap(cell_size)
+    for kf in kfs:
+        before = pmap
+        pmap = pmap.merge(kf).map
+        # explored space only grows (snap rounding may move a vector by half a grid step)
+        lost = shapely.difference(before.explored_region(), pmap.explored_region()).area
+        assert lost <= before.explored_region().length * PRECISION_M
+        # the keyframe is now explored
+        gained = shapely.difference(kf.to_shapely(), pmap.explored_region()).area
+        assert gained <= kf.to_shapely().length * PRECISION_M
+    assert_well_formed(pmap)
+    # idempotent: every keyframe merged again changes nothing
+    for kf in kfs:
+        assert not pmap.merge(kf).changed
+    # order independent up to the precision grid
+    rev = GridPolyMap(cell_size)
+    for kf in reversed(kfs):
+        rev = rev.merge(kf).map
+    assert rev.explored_area() == pytest.approx(pmap.explored_area(), rel=1e-6, abs=1e-6)
+
+
+@given(st.lists(keyframes(), min_size=2, max_size=5))
+def test_applying_a_delta_to_a_copy_reproduces_the_source(kfs):
+    src = GridPolyMap(2.0).merge(kfs[0]).map
+    copy = src
+    for kf in kfs[1:]:
+        new = src.merge(kf).map
+        copy = copy.apply_delta(new.delta_since(src.version))
+        src = new
+    assert copy.version == src.version and set(copy.cells) == set(src.cells)
+    assert all(copy.cells[k].same_content(src.cells[k]) for k in src.cells)
