@@ -1,0 +1,1 @@
+"""File input and output (maps, logs, trajectories, exports). The core does no I/O."""
