@@ -1,0 +1,43 @@
+"""Stage 5 of PolySLAM: the keyframe polygon (thesis 3.4).
+
+The aligned scan points are joined in beam order and closed through the sensor
+centre. A vector between two real returns no farther apart than ``max_gap_m`` is an
+obstacle; every other vector (to or from an invalid beam, across a gap, or to the
+sensor centre) is a frontier. Points taken in angular order around the centre make a
+star-shaped, hence simple, polygon.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyswarm.polymap import Ring, TypedPolygon, VectorType
+from polyswarm.scan import ScanPoints
+
+
+def transform(xy: np.ndarray, pose) -> np.ndarray:
+    x, y, th = pose
+    c, s = np.cos(th), np.sin(th)
+    return np.asarray(xy) @ np.array([[c, s], [-s, c]]) + np.array([x, y])
+
+
+def vector_types(valid: np.ndarray, xy: np.ndarray, max_gap_m: float, closed: bool) -> np.ndarray:
+    """Type of vector k (point k to point k+1); for open scans the last one is unused."""
+    nxt = np.roll(xy, -1, axis=0)
+    gap = np.hypot(*(nxt - xy).T)
+    ok = valid & np.roll(valid, -1) & (gap <= max_gap_m)
+    t = np.where(ok, VectorType.OBSTACLE, VectorType.FRONTIER).astype(np.uint8)
+    if not closed:
+        t[-1] = VectorType.FRONTIER
+    return t
+
+
+def keyframe_polygon(points: ScanPoints, pose, max_gap_m: float = 0.5) -> TypedPolygon:
+    """The keyframe polygon in the world frame for a sensor at ``pose`` (x, y, theta)."""
+    xy = transform(points.xy, pose)
+    types = vector_types(points.valid, points.xy, max_gap_m, points.full_circle)
+    if not points.full_circle:
+        # last point -> sensor centre -> first point, both frontiers
+        xy = np.vstack([xy, [pose[0], pose[1]]])
+        types = np.append(types, VectorType.FRONTIER).astype(np.uint8)
+    return TypedPolygon(Ring(xy, types))

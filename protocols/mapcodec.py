@@ -1,0 +1,316 @@
+"""PolyMap and delta encoding: msgpack envelope, varint-packed geometry.
+
+Layout (normative text in ``PROTOCOL.md``)::
+
+    map   = msgpack {"t": "polymap", "v": 1, "cs": cell size (units), "ver": n,
+                     "q": quantum (units), "ox": int, "oy": int, "polys": bin}
+    delta = msgpack {"t": "polymap-delta", "v": 1, "cs": cell size (units), "base": n, "ver": n,
+                     "cells": bin}
+
+A full map carries the explored space as polygons across cell borders (the receiver
+cuts them into cells again; sectors on cell borders are implied). A delta carries the
+changed cells exactly. Both are sequences of unsigned varints::
+
+    polys: n_polygons, then per polygon: n_rings, rings...   (first ring is the shell)
+           vertex (x, y) in units = q * (ox + u, oy + v) with u, v >= 0
+    cells: n_cells, then per cell (sorted by (i, j)):
+           zz(di) zz(dj) age q n_polygons, per polygon: n_rings, rings...
+           (di, dj: index step from the previous cell; age: ver - cell version;
+            vertex in units = (i * cs + q * u, j * cs + q * v) with 0 <= q*u, q*v <= cs)
+    ring:  n  u0 v0  h[1..n-1]  dy[1..m]  type_n
+           h = zz(d) << 4 | mode << 2 | type     mode 0: step (d, 0)   mode 1: (0, d)
+                                                 mode 2: (d, dy), dy read after all h
+           the n-th vector closes the ring; only its type is sent
+
+A unit is 10 micrometres (the map's precision grid, so nothing is lost); ``q`` is the
+largest quantum dividing all coordinates (1 unit for SLAM maps, 5,000-20,000 units for
+converted 5-20 cm grid maps), so a typical vector costs one to four bytes.
+
+Decoding untrusted bytes raises ``DecodeError`` (and nothing else) on any defect, and
+builds a new map object, so a bad message never touches an existing map.
+"""
+
+from __future__ import annotations
+
+import math
+
+import msgpack
+import numpy as np
+import shapely
+
+from polyswarm.errors import DecodeError, PolyswarmError
+from polyswarm.polymap import (
+    PRECISION_M,
+    Cell,
+    GridPolyMap,
+    MapDelta,
+    Ring,
+    TypedPolygon,
+    VectorType,
+)
+from polyswarm.polymap import UNITS_PER_M as POLYMAP_UNITS_PER_M
+from protocols.varint import decode_varints, encode_varints, unzigzag, zigzag
+
+FORMAT_VERSION = 1
+MAP_TYPE = "polymap"
+DELTA_TYPE = "polymap-delta"
+UNITS_PER_M = POLYMAP_UNITS_PER_M  # wire coordinates are integers of 10 um (PRECISION_M)
+MAX_CELL_UNITS = 100 * UNITS_PER_M  # cells larger than 100 m are refused
+MAX_MESSAGE_BYTES = 256 * 1024 * 1024
+
+
+def _units(xy: np.ndarray) -> np.ndarray:
+    return np.rint(np.asarray(xy) * UNITS_PER_M).astype(np.int64)
+
+
+def _encode_cells(cells: list[Cell], version: int, cell_u: int) -> bytes:
+    vals: list[np.ndarray] = [np.array([len(cells)], dtype=np.int64)]
+    pi, pj = 0, 0
+    for cell in sorted(cells, key=lambda c: c.index):
+        i, j = cell.index
+        origin = np.array([i * cell_u, j * cell_u], dtype=np.int64)
+        local = [_units(r.xy) - origin for p in cell.polygons for r in p.rings()]
+        q = int(np.gcd.reduce(np.concatenate([x.ravel() for x in local]))) if local else 1
+        q = max(q, 1)
+        head = [zigzag(i - pi), zigzag(j - pj), version - cell.version, q, len(cell.polygons)]
+        vals.append(np.array(head, dtype=np.int64))
+        pi, pj = i, j
+        k = 0
+        for poly in cell.polygons:
+            vals.append(np.array([len(poly.rings())], dtype=np.int64))
+            for ring in poly.rings():
+                vals.append(_encode_ring(local[k] // q, ring.types))
+                k += 1
+    return encode_varints(np.concatenate(vals).astype(np.uint64))
+
+
+def _encode_ring(v: np.ndarray, types: np.ndarray) -> np.ndarray:
+    d = np.diff(v, axis=0)  # n-1 steps; the closing vector is implicit
+    horiz = d[:, 1] == 0
+    vert = (d[:, 0] == 0) & ~horiz
+    mode = np.where(horiz, 0, np.where(vert, 1, 2))
+    primary = np.where(vert, d[:, 1], d[:, 0])
+    h = (zigzag(primary).astype(np.int64) << 4) | (mode << 2) | types[:-1].astype(np.int64)
+    extra = zigzag(d[mode == 2, 1]).astype(np.int64)
+    return np.concatenate([[len(v), v[0, 0], v[0, 1]], h, extra, [int(types[-1])]])
+
+
+def encode_map(pmap: GridPolyMap) -> bytes:
+    """A full map: its explored space dissolved across cell borders."""
+    cell_u = _cell_units(pmap.cell_size)
+    polys = pmap.dissolve()
+    rings_u = [[_units(r.xy) for r in p.rings()] for p in polys]
+    flat = np.concatenate([x for rs in rings_u for x in rs]) if polys else np.zeros((1, 2), int)
+    q = max(int(np.gcd.reduce(flat.ravel())), 1)
+    o = flat.min(axis=0) // q
+    vals = [np.array([len(polys)], dtype=np.int64)]
+    for p, rs in zip(polys, rings_u, strict=True):
+        vals.append(np.array([len(rs)], dtype=np.int64))
+        for ring, xy in zip(p.rings(), rs, strict=True):
+            vals.append(_encode_ring(xy // q - o, ring.types))
+    body = encode_varints(np.concatenate(vals).astype(np.uint64))
+    return msgpack.packb(
+        {
+            "t": MAP_TYPE,
+            "v": FORMAT_VERSION,
+            "cs": cell_u,
+            "ver": pmap.version,
+            "q": q,
+            "ox": int(o[0]),
+            "oy": int(o[1]),
+            "polys": body,
+        }
+    )
+
+
+def encode_delta(delta: MapDelta) -> bytes:
+    cell_u = _cell_units(delta.cell_size)
+    body = _encode_cells(list(delta.cells), delta.version, cell_u)
+    return msgpack.packb(
+        {
+            "t": DELTA_TYPE,
+            "v": FORMAT_VERSION,
+            "cs": cell_u,
+            "base": delta.base_version,
+            "ver": delta.version,
+            "cells": body,
+        }
+    )
+
+
+def _cell_units(cell_size: float) -> int:
+    units = round(cell_size * UNITS_PER_M)
+    if abs(units - cell_size * UNITS_PER_M) > 1e-6 or not (1 <= units <= MAX_CELL_UNITS):
+        raise PolyswarmError(f"cell size {cell_size} m is not a whole number of 10 um units")
+    return units
+
+
+# ---------------------------------------------------------------------------------------
+# Decoding (untrusted input)
+# ---------------------------------------------------------------------------------------
+
+
+def _unpack(data: bytes, kind: str) -> dict:
+    if not isinstance(data, bytes | bytearray | memoryview):
+        raise DecodeError(f"{kind}: expected bytes, got {type(data).__name__}")
+    if len(data) > MAX_MESSAGE_BYTES:
+        raise DecodeError(f"{kind}: message of {len(data)} bytes is too large")
+    try:
+        obj = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True)
+    except Exception as e:  # msgpack raises many types on garbage
+        raise DecodeError(f"{kind}: not valid msgpack ({type(e).__name__}: {e})") from None
+    if not isinstance(obj, dict):
+        raise DecodeError(f"{kind}: expected a msgpack map")
+    if obj.get("t") != kind:
+        raise DecodeError(f"expected message type {kind!r}, got {obj.get('t')!r}")
+    if obj.get("v") != FORMAT_VERSION:
+        raise DecodeError(f"{kind}: unsupported format version {obj.get('v')!r}")
+    return obj
+
+
+def _int_field(obj: dict, key: str, lo: int, hi: int) -> int:
+    v = obj.get(key)
+    if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
+        raise DecodeError(f"field {key!r} must be an integer in [{lo}, {hi}], got {v!r}")
+    return v
+
+
+def decode_map(data: bytes) -> GridPolyMap:
+    """Decode a full map; any defect raises ``DecodeError``."""
+    obj = _unpack(data, MAP_TYPE)
+    cell_u = _int_field(obj, "cs", 1, MAX_CELL_UNITS)
+    version = _int_field(obj, "ver", 0, 2**62)
+    q = _int_field(obj, "q", 1, 2**30)
+    ox = _int_field(obj, "ox", -(2**40), 2**40)
+    oy = _int_field(obj, "oy", -(2**40), 2**40)
+    body = obj.get("polys")
+    if not isinstance(body, bytes):
+        raise DecodeError("field 'polys' must be binary")
+    r = _Reader(decode_varints(body))
+    polys = []
+    origin = np.array([ox * q, oy * q], dtype=np.int64)
+    for k in range(r.one("polygon count", 0, len(r.vals))):
+        n_rings = r.one("ring count", 1, len(r.vals))
+        rings = [_decode_ring(r, q, 2**40, None, origin) for _ in range(n_rings)]
+        poly = TypedPolygon(rings[0], tuple(rings[1:]))
+        try:
+            poly.validate()
+        except PolyswarmError as e:
+            raise DecodeError(f"polygon {k}: {e}") from None
+        polys.append(poly)
+    if r.pos != len(r.vals):
+        raise DecodeError(f"{len(r.vals) - r.pos} trailing values after the last polygon")
+    try:
+        return GridPolyMap.from_polygons(polys, cell_u / UNITS_PER_M, version)
+    except PolyswarmError as e:
+        raise DecodeError(f"map cannot be rebuilt: {e}") from None
+
+
+def decode_delta(data: bytes) -> MapDelta:
+    """Decode a delta; any defect raises ``DecodeError``."""
+    obj = _unpack(data, DELTA_TYPE)
+    cell_u = _int_field(obj, "cs", 1, MAX_CELL_UNITS)
+    version = _int_field(obj, "ver", 0, 2**62)
+    base = _int_field(obj, "base", -1, version)
+    cells = _decode_cells(obj.get("cells"), cell_u, version)
+    return MapDelta(cell_u / UNITS_PER_M, base, version, tuple(cells))
+
+
+class _Reader:
+    def __init__(self, vals: np.ndarray) -> None:
+        self.vals = vals
+        self.pos = 0
+
+    def take(self, n: int, what: str) -> np.ndarray:
+        if n < 0 or self.pos + n > len(self.vals):
+            raise DecodeError(f"truncated cell data while reading {what}")
+        out = self.vals[self.pos : self.pos + n]
+        self.pos += n
+        return out
+
+    def one(self, what: str, lo: int = 0, hi: int = 2**62) -> int:
+        v = int(self.take(1, what)[0])
+        if not (lo <= v <= hi):
+            raise DecodeError(f"{what} out of range: {v}")
+        return v
+
+
+def _decode_cells(body, cell_u: int, version: int) -> list[Cell]:
+    if not isinstance(body, bytes):
+        raise DecodeError("field 'cells' must be binary")
+    vals = decode_varints(body)
+    r = _Reader(vals)
+    n_cells = r.one("cell count", 0, len(vals))
+    cells = []
+    seen = set()
+    i = j = 0
+    size = cell_u / UNITS_PER_M
+    for _ in range(n_cells):
+        i += int(unzigzag(np.array([r.one("cell index")]))[0])
+        j += int(unzigzag(np.array([r.one("cell index")]))[0])
+        if abs(i) > 2**40 or abs(j) > 2**40:
+            raise DecodeError(f"absurd cell index ({i}, {j})")
+        if (i, j) in seen:
+            raise DecodeError(f"cell ({i}, {j}) appears twice")
+        seen.add((i, j))
+        age = r.one("cell age", 0, version)
+        q = r.one("quantum", 1, cell_u)
+        n_polys = r.one("polygon count", 0, len(vals))
+        polys = []
+        for _p in range(n_polys):
+            n_rings = r.one("ring count", 1, len(vals))
+            origin = np.array([i * cell_u, j * cell_u], dtype=np.int64)
+            rings = [_decode_ring(r, q, cell_u, (i, j), origin) for _ in range(n_rings)]
+            polys.append(TypedPolygon(rings[0], tuple(rings[1:])))
+        cell = Cell((i, j), size, tuple(polys), version - age)
+        _check_cell(cell)
+        cells.append(cell)
+    if r.pos != len(vals):
+        raise DecodeError(f"{len(vals) - r.pos} trailing values after the last cell")
+    return cells
+
+
+def _decode_ring(r: _Reader, q: int, limit_u: int, ix, origin: np.ndarray) -> Ring:
+    n = r.one("vertex count", 3, len(r.vals))
+    x0, y0 = int(r.take(1, "x0")[0]), int(r.take(1, "y0")[0])
+    h = r.take(n - 1, "vectors")
+    ty = h & 3
+    mode = (h >> 2) & 3
+    if (ty > VectorType.SECTOR).any() or (mode == 3).any():
+        raise DecodeError("unknown vector type or mode")
+    primary = unzigzag((h >> 4).astype(np.uint64))
+    m = int((mode == 2).sum())
+    extra = unzigzag(r.take(m, "diagonal steps").astype(np.uint64))
+    dx = np.where(mode == 1, 0, primary)
+    dy = np.where(mode == 0, 0, np.where(mode == 1, primary, 0))
+    dy[mode == 2] = extra
+    last = r.one("closing vector type", 0, int(VectorType.SECTOR))
+    steps = np.stack([dx, dy], axis=1)
+    v = np.vstack([[x0, y0], np.array([x0, y0]) + np.cumsum(steps, axis=0)])
+    where = f"cell {ix}" if ix is not None else "polygon"
+    if (v < 0).any() or (v > limit_u // q).any():
+        raise DecodeError(f"{where}: vertex outside the cell or map")
+    if np.array_equal(v[-1], v[0]) or (steps == 0).all(axis=1).any():
+        raise DecodeError(f"{where}: zero-length vector (open or degenerate ring)")
+    xy = (v * q + origin) / UNITS_PER_M  # k / 100000 exactly as GEOS rounds to the grid
+    return Ring(xy, np.append(ty, last).astype(np.uint8))
+
+
+def _check_cell(cell: Cell) -> None:
+    for k, p in enumerate(cell.polygons):
+        try:
+            p.validate()
+        except PolyswarmError as e:
+            raise DecodeError(f"cell {cell.index} polygon {k}: {e}") from None
+    if len(cell.polygons) > 1:
+        geom = shapely.MultiPolygon([p.to_shapely() for p in cell.polygons])
+        if not geom.is_valid:
+            raise DecodeError(f"cell {cell.index}: polygons overlap")
+    if cell.polygons:
+        x0, y0, x1, y1 = cell.bounds
+        bx = shapely.bounds(cell.region)
+        tol = PRECISION_M / 2
+        if bx[0] < x0 - tol or bx[1] < y0 - tol or bx[2] > x1 + tol or bx[3] > y1 + tol:
+            raise DecodeError(f"cell {cell.index}: geometry outside the cell")
+    if not all(math.isfinite(v) for v in cell.bounds):
+        raise DecodeError(f"cell {cell.index}: non-finite bounds")

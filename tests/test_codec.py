@@ -1,0 +1,205 @@
+"""Map and delta encoding: round trips, golden vectors, and hostile input."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from polyswarm.errors import DecodeError
+from polyswarm.polymap import UNITS_PER_M, GridPolyMap
+from protocols.golden.make_golden import describe_polygons, golden_maps
+from protocols.mapcodec import decode_delta, decode_map, encode_delta, encode_map
+from protocols.varint import decode_varints, encode_varints, unzigzag, zigzag
+from tests.conftest import F, O, rect, star
+
+GOLDEN = Path(__file__).resolve().parents[1] / "protocols" / "golden"
+
+
+def sample_map() -> GridPolyMap:
+    pmap = GridPolyMap(2.0)
+    rng = np.random.default_rng(7)
+    for _ in range(12):
+        c = rng.uniform(-4, 4, 2)
+        r = rng.uniform(0.5, 3, 24)
+        pmap = pmap.merge(star(c, r, rng.integers(0, 2, 24))).map
+    return pmap
+
+
+def test_varints_round_trip():
+    v = np.array([0, 1, 127, 128, 300, 2**35, 2**62], dtype=np.uint64)
+    assert np.array_equal(decode_varints(encode_varints(v)), v.astype(np.int64))
+    s = np.array([0, -1, 1, -(2**40), 2**40])
+    assert np.array_equal(unzigzag(zigzag(s)), s)
+    assert encode_varints(np.array([300])) == b"\xac\x02"
+
+
+def test_full_map_round_trip_keeps_explored_space():
+    pmap = sample_map()
+    back = decode_map(encode_map(pmap))
+    assert back.version == pmap.version and back.cell_size == pmap.cell_size
+    assert back.explored_area() == pytest.approx(pmap.explored_area(), rel=1e-9)
+    for kind in ("obstacle", "frontier"):
+        s0 = pmap.vector_counts()[kind]
+        assert s0 == 0 or back.vector_counts()[kind] > 0
+    pts = np.random.default_rng(1).uniform(-8, 8, (2000, 2))
+    assert np.array_equal(back.is_free_many(pts), pmap.is_free_many(pts))
+
+
+def test_delta_round_trip_is_exact():
+    a = sample_map()
+    b = a.merge(rect(3.3, -1.0, 9.1, 2.5, (O, F, O, F))).map
+    delta = b.delta_since(a.version)
+    back = decode_delta(encode_delta(delta))
+    assert (back.base_version, back.version) == (a.version, b.version)
+    copy = a.apply_delta(back)
+    assert all(copy.cells[k].same_content(b.cells[k]) for k in b.cells)
+    assert all(copy.cells[k].version == b.cells[k].version for k in b.cells)
+
+
+def test_golden_vectors_decode_to_their_description():
+    m = json.loads((GOLDEN / "map_v1.json").read_text())
+    pmap = decode_map((GOLDEN / "map_v1.bin").read_bytes())
+    assert (
+        pmap.version == m["version"] and round(pmap.cell_size * UNITS_PER_M) == m["cell_size_units"]
+    )
+    assert describe_polygons(pmap.dissolve()) == m["polygons"]
+    d = json.loads((GOLDEN / "delta_v1.json").read_text())
+    delta = decode_delta((GOLDEN / "delta_v1.bin").read_bytes())
+    assert (delta.base_version, delta.version) == (d["base_version"], d["version"])
+    got = [
+        {"index": list(c.index), "version": c.version, "polygons": describe_polygons(c.polygons)}
+        for c in delta.cells
+    ]
+    assert got == d["cells"]
+
+
+def test_encoder_reproduces_the_golden_bytes():
+    a, b = golden_maps()
+    assert encode_map(b) == (GOLDEN / "map_v1.bin").read_bytes()
+    assert encode_delta(b.delta_since(a.version)) == (GOLDEN / "delta_v1.bin").read_bytes()
+
+
+# --- hostile input ---------------------------------------------------------------------
+
+
+def test_every_truncation_raises_decode_error_only():
+    for blob, decode in (
+        ((GOLDEN / "map_v1.bin").read_bytes(), decode_map),
+        ((GOLDEN / "delta_v1.bin").read_bytes(), decode_delta),
+    ):
+        for n in range(len(blob)):
+            with pytest.raises(DecodeError):
+                decode(blob[:n])
+
+
+@given(st.binary(max_size=300))
+def test_random_bytes_raise_decode_error_only(data):
+    for decode in (decode_map, decode_delta):
+        with contextlib.suppress(DecodeError):
+            decode(data)
+
+
+@given(st.integers(0, 10_000), st.integers(0, 255))
+def test_flipped_bytes_never_crash(pos, value):
+    blob = bytearray((GOLDEN / "delta_v1.bin").read_bytes())
+    blob[pos % len(blob)] = value
+    with contextlib.suppress(DecodeError):
+        decode_delta(bytes(blob))
+
+
+def _delta_with_body(body: bytes, **fields) -> bytes:
+    msg = {"t": "polymap-delta", "v": 1, "cs": 200000, "base": 0, "ver": 1, "cells": body}
+    msg.update(fields)
+    return msgpack.packb(msg)
+
+
+def _cell(ring_vals: list[int], q: int = 1000) -> bytes:
+    # one cell (0, 0), age 0, quantum q, one polygon with one ring
+    return encode_varints(np.array([1, 0, 0, 0, q, 1, 1, *ring_vals], dtype=np.uint64))
+
+
+def _z(v: int) -> int:
+    return int(zigzag(np.array([v]))[0])
+
+
+def _h(d: int, mode: int, t: int) -> int:
+    return (_z(d) << 4) | (mode << 2) | t
+
+
+GOOD_RING = [4, 10, 10, _h(50, 0, 0), _h(50, 1, 0), _h(-50, 0, 0), 0]  # 0.5 m square
+
+
+@pytest.mark.parametrize(
+    ("msg", "match"),
+    [
+        (b"\xc1", "not valid msgpack"),
+        (msgpack.packb([1, 2]), "msgpack map"),
+        (msgpack.packb({"t": "polymap-delta", "v": 2}), "format version"),
+        (_delta_with_body(b"", cs="x"), "'cs'"),
+        (_delta_with_body(b"", cs=float("nan")), "'cs'"),
+        (_delta_with_body(b"", ver=-3), "'ver'"),
+        (_delta_with_body(b"", base=5, ver=1), "'base'"),
+        (_delta_with_body(b"\x80"), "truncated varint"),
+        (_delta_with_body(encode_varints(np.array([10**6]))), "cell count"),
+        (
+            _delta_with_body(_cell([4, 10, 10, _h(50, 0, 0), _h(50, 1, 0), _h(-50, 0, 0)])),
+            "truncated",
+        ),
+        (_delta_with_body(_cell([2, 10, 10, _h(50, 0, 0), 0])), "vertex count"),
+        (
+            _delta_with_body(_cell([4, 10, 10, _h(50, 0, 3), _h(50, 1, 0), _h(-50, 0, 0), 0])),
+            "unknown vector type",
+        ),
+        (
+            _delta_with_body(_cell([4, 10, 10, _h(50, 3, 0), _h(50, 1, 0), _h(-50, 0, 0), 0])),
+            "mode",
+        ),
+        (
+            _delta_with_body(_cell([4, 190, 10, _h(50, 0, 0), _h(50, 1, 0), _h(-50, 0, 0), 0])),
+            "outside the cell",
+        ),
+        # clockwise square: free space would be on the right
+        (
+            _delta_with_body(_cell([4, 10, 10, _h(50, 1, 0), _h(50, 0, 0), _h(-50, 1, 0), 0])),
+            "clockwise",
+        ),
+        # bow tie: the ring crosses itself
+        (
+            _delta_with_body(
+                _cell([4, 10, 10, _h(50, 2, 0), _h(-50, 0, 0), _h(70, 2, 0), _z(50), _z(-50), 0])
+            ),
+            "not simple",
+        ),
+        # open ring: the last vertex is the first one again (zero-length closing vector)
+        (
+            _delta_with_body(
+                _cell([4, 10, 10, _h(50, 0, 0), _h(50, 1, 0), _h(-50, 2, 0), _z(-50), 0])
+            ),
+            "zero-length",
+        ),
+        (_delta_with_body(_cell(GOOD_RING) + b"\x01"), "trailing"),
+    ],
+)
+def test_malformed_messages_are_rejected_with_one_error(msg, match):
+    with pytest.raises(DecodeError, match=match):
+        decode_delta(msg)
+
+
+def test_a_good_hand_made_delta_decodes():
+    delta = decode_delta(_delta_with_body(_cell(GOOD_RING)))
+    assert delta.cells[0].area == pytest.approx(0.25)
+
+
+def test_decoding_never_touches_an_existing_map():
+    pmap = sample_map()
+    before = {k: c for k, c in pmap.cells.items()}
+    with pytest.raises(DecodeError):
+        pmap.apply_delta(decode_delta(b"garbage"))
+    assert dict(pmap.cells) == before
