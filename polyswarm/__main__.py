@@ -1,0 +1,3 @@
+from polyswarm.cli import main
+
+main()

@@ -1,0 +1,77 @@
+"""The ``polyswarm`` command: the composition root of the project.
+
+Only this package wires the core, the simulator (``sim``), the agents (``agents``) and
+Zenoh together; heavy imports happen inside the commands. Known errors
+(``PolyswarmError``) become a one-line message and exit code 1.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+
+import typer
+
+from polyswarm import __version__
+from polyswarm.errors import PolyswarmError
+
+app = typer.Typer(
+    help="polyswarm: multi-robot exploration with polygon maps (PolyMap), PolySLAM and Zenoh.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode="rich",
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+map_app = typer.Typer(help="Convert, inspect and export PolyMaps.", no_args_is_help=True)
+bench_app = typer.Typer(
+    help="Benchmarks: a table by default, --json for machines.", no_args_is_help=True
+)
+app.add_typer(map_app, name="map")
+app.add_typer(bench_app, name="bench")
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"polyswarm {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
+    verbose: int = typer.Option(
+        0, "--verbose", "-v", count=True, help="More log output (-vv: debug)."
+    ),
+) -> None:
+    level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
+    setup_logging(level)
+
+
+def setup_logging(level: int) -> None:
+    from rich.logging import RichHandler
+
+    root = logging.getLogger()
+    if not any(isinstance(h, RichHandler) for h in root.handlers):
+        handler = RichHandler(show_path=False, rich_tracebacks=False, markup=False)
+        handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
+        root.addHandler(handler)
+    root.setLevel(level)
+
+
+# command modules register themselves on the apps above
+from polyswarm.cli import bench_cmds, map_cmds  # noqa: E402,F401
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point: typer handles usage errors and --help; our errors become one line."""
+    try:
+        app(args=argv)
+    except PolyswarmError as e:
+        logging.getLogger("polyswarm").debug("error", exc_info=True)
+        typer.secho(f"error: {e}", fg=typer.colors.RED, err=True)
+        sys.exit(1)
+    except KeyboardInterrupt:
+        typer.secho("interrupted", err=True)
+        sys.exit(130)

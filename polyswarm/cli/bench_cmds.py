@@ -1,0 +1,90 @@
+"""``polyswarm bench NAME [--json]``: benchmarks with a table or machine-readable output."""
+
+from __future__ import annotations
+
+import json
+
+import typer
+
+from polyswarm.cli import bench_app
+
+JSON_OPT = typer.Option(False, "--json", help="Print JSON instead of a table.")
+
+
+def _emit(result: dict, as_json: bool, title: str, rows: list[tuple[str, str]]) -> None:
+    if as_json:
+        typer.echo(json.dumps(result, indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title)
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    for k, v in rows:
+        table.add_row(k, v)
+    Console().print(table)
+
+
+@bench_app.command("format")
+def bench_format(
+    as_json: bool = JSON_OPT,
+    cell_size: float = typer.Option(2.0, help="Cell size, metres."),
+) -> None:
+    """PolyMap bytes against PNG/zlib of the same 5 cm grid; merge latency."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from polyswarm.benchmarks import format as fmt
+
+    console = Console(stderr=True)
+    with console.status("converting worlds and merging keyframes"):
+        res = fmt.run(cell_size)
+    if as_json:
+        typer.echo(json.dumps(res, indent=2))
+        return
+    t = Table(
+        title=f"PolyMap format ({fmt.GRID_RESOLUTION_M * 100:.0f} cm grids, {cell_size:g} m cells)"
+    )
+    for col in (
+        "world",
+        "vectors",
+        "polygons",
+        "bytes",
+        "zlib",
+        "PNG",
+        "grid zlib",
+        "bytes/PNG",
+        "free kept",
+        "occ kept",
+    ):
+        t.add_column(col, justify="right")
+    for name, w in res["worlds"].items():
+        t.add_row(
+            name,
+            str(w["vectors"]),
+            str(w["polygons"]),
+            str(w["encoded_bytes"]),
+            str(w["encoded_zlib_bytes"]),
+            str(w["grid_png_bytes"]),
+            str(w["grid_zlib_bytes"]),
+            f"{w['encoded_bytes'] / w['grid_png_bytes']:.2f}",
+            f"{w['round_trip_free_kept']:.4f}",
+            f"{w['round_trip_occupied_kept']:.4f}",
+        )
+    Console().print(t)
+    _emit(
+        res,
+        False,
+        "merge",
+        [
+            (
+                "keyframes (vectors)",
+                f"{res['keyframes']} ({res['keyframe_vectors_min']}-{res['keyframe_vectors_max']})",
+            ),
+            ("final map vectors", str(res["final_map_vectors"])),
+            ("merge p50", f"{res['merge_p50_ms']:.2f} ms"),
+            ("merge p95", f"{res['merge_p95_ms']:.2f} ms"),
+            ("bytes per vector", f"{res['bytes_per_vector']:.2f}"),
+        ],
+    )
