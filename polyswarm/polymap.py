@@ -38,10 +38,17 @@ log = logging.getLogger(__name__)
 
 PRECISION_M = 1e-5  # vertex grid: 10 um, also the quantum of the wire format
 UNITS_PER_M = 100_000  # integer grid units per metre (1 / PRECISION_M, exact)
-MATCH_TOL_M = 1.5 * PRECISION_M  # a vector this close to a source obstacle inherits its type
+MATCH_TOL_M = 3 * PRECISION_M  # a vector this close to a source obstacle inherits its type
 BORDER_TOL_M = 1e-6  # a vertex this close to a cell border lies on it (borders are on-grid)
+SECTOR_TOL_M = 3 * PRECISION_M  # explored space this close across a border continues it
+# Growth narrower than this everywhere is rounding noise, not new space: rounding an
+# intersection point moves a vector by at most 0.71 grid steps, and merging a polygon
+# again can meet such a vertex from the other side (measured: slivers up to ~1.4 steps).
+# Ignoring them makes merging exactly idempotent; real growth that thin (possible only
+# between inputs one or two grid steps apart) is dropped, which is the "up to the
+# precision grid" of order independence.
+SLIVER_M = 2 * PRECISION_M
 MIN_AREA_M2 = 1e-9  # polygons smaller than this (30 um square) are rounding slivers
-SLIVER_M = 2 * PRECISION_M  # growth thinner than this is rounding noise, not new space
 
 CellIndex = tuple[int, int]
 
@@ -343,7 +350,8 @@ class GridPolyMap:
         inside = shapely.contains_properly(geom, boxes)
         pieces = boxes.copy()
         if (~inside).any():
-            pieces[~inside] = _clip_to_cells(geom, boxes[~inside])
+            expected = geom.area - float(shapely.area(boxes[inside]).sum())
+            pieces[~inside] = _clip_to_cells(geom, boxes[~inside], expected)
         return self._merge_pieces(idxs, pieces, src_starts, src_ends)
 
     def merge_cells(self, cells: Iterable[Cell]) -> MergeResult:
@@ -394,21 +402,18 @@ class GridPolyMap:
         old = np.array(
             [self.cells[i].region if i in self.cells else empty for i in idxs], dtype=object
         )
-        regions = _union_snapped(old, pieces)
-        # growth thinner than the precision grid is rounding noise, not new space: this
-        # keeps merging idempotent and stops jitter from producing deltas
+        regions = _clean(_union_snapped(old, pieces))
         old_area = shapely.area(old)
         grew = shapely.area(regions) - old_area
-        maybe = (grew <= shapely.length(old) * SLIVER_M) & ~shapely.is_empty(old) & (grew > 0)
+        maybe = (grew > 0) & (grew <= shapely.length(old) * SLIVER_M) & ~shapely.is_empty(old)
         if maybe.any():
-            extra = shapely.difference(regions[maybe], old[maybe], grid_size=PRECISION_M)
-            thin = shapely.is_empty(shapely.buffer(extra, -SLIVER_M / 2, quad_segs=1))
-            k = np.nonzero(maybe)[0][thin]
-            regions[k] = old[k]
-        same = (grew <= 0) & ~shapely.is_empty(old)
-        regions[same] = old[same]
-        # nothing explored is ever lost: snap rounding moves a vector by at most half a
-        # grid step, so any larger loss is a bug, and the merge is refused as a whole
+            k = np.nonzero(maybe)[0]
+            extra = shapely.difference(regions[k], old[k])  # not rounded: keep the slivers
+            thin = shapely.is_empty(shapely.buffer(extra, -SLIVER_M / 2, quad_segs=4))
+            regions[k[thin]] = old[k[thin]]
+        regions[(grew <= 0) & ~shapely.is_empty(old)] = old[(grew <= 0) & ~shapely.is_empty(old)]
+        # nothing explored is ever lost: rounding moves a vector by less than a grid step,
+        # so any larger loss is a bug, and the merge is refused as a whole
         lost = shapely.area(regions) < old_area - shapely.length(old) * PRECISION_M
         if lost.any():  # pragma: no cover - defensive
             raise MapError(
@@ -588,11 +593,14 @@ def point_segment_distance(p: np.ndarray, s: np.ndarray, e: np.ndarray) -> np.nd
     return np.hypot(*(p - q).T)
 
 
-def _clip_to_cells(geom: shapely.Geometry, boxes: np.ndarray) -> np.ndarray:
+def _clip_to_cells(geom: shapely.Geometry, boxes: np.ndarray, expected_area: float) -> np.ndarray:
     """``geom`` clipped to each box and snapped to the precision grid, valid and polygonal.
 
-    GEOS' rectangle clipper is several times faster than a general intersection; its
-    rare invalid outputs (and those of snapping) fall back to a snap-rounded overlay.
+    GEOS' rectangle clipper is several times faster than a general intersection, but it
+    can return a valid, wrong polygon when a vertex lies on a box corner (seen in the
+    property tests): if the pieces do not add up to ``expected_area``, every piece is
+    recomputed with the robust overlay. Outputs made invalid by snapping fall back to a
+    snap-rounded overlay.
     """
     bb = shapely.bounds(boxes)
     out = np.empty(len(boxes), dtype=object)
@@ -607,7 +615,10 @@ def _clip_to_cells(geom: shapely.Geometry, boxes: np.ndarray) -> np.ndarray:
     else:
         for k, b in enumerate(bb):
             out[k] = shapely.clip_by_rect(geom, *b)
-    out = shapely.set_precision(_polygonal(out), PRECISION_M, mode="pointwise")
+    out = _polygonal(out)
+    if abs(float(shapely.area(out).sum()) - expected_area) > 1e-9 * max(1.0, expected_area):
+        out = _polygonal(shapely.intersection(geom, boxes))
+    out = shapely.set_precision(out, PRECISION_M, mode="pointwise")
     bad = ~shapely.is_valid(out)
     if bad.any():
         out[bad] = _polygonal(shapely.intersection(geom, boxes[bad], grid_size=PRECISION_M))
@@ -617,17 +628,32 @@ def _clip_to_cells(geom: shapely.Geometry, boxes: np.ndarray) -> np.ndarray:
 def _union_snapped(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Pairwise union of valid on-grid geometries, with the result on the grid.
 
-    A floating-point overlay followed by rounding is fast and almost always valid; the
-    rest go through GEOS snap-rounding (``grid_size``), which is robust but slower.
+    A floating-point overlay keeps every input vertex (already on the grid); its new
+    intersection points are rounded to the nearest grid point, which moves a vector by
+    at most 0.71 grid steps. The rare outputs made invalid by rounding go through GEOS
+    snap rounding (``grid_size``) instead.
     """
-    try:
-        out = shapely.set_precision(shapely.union(a, b), PRECISION_M, mode="pointwise")
-        bad = ~shapely.is_valid(out)
-    except shapely.errors.GEOSException:
-        out, bad = a.copy(), np.ones(len(a), dtype=bool)
+    union, failed = _overlay(shapely.union, a, b)
+    out = shapely.set_precision(_clean(union), PRECISION_M, mode="pointwise")
+    bad = failed | ~shapely.is_valid(out)
     if bad.any():
         out[bad] = shapely.union(a[bad], b[bad], grid_size=PRECISION_M)
     return out
+
+
+def _overlay(op, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``op(a, b)`` elementwise; where GEOS raises, an empty result and a failure flag."""
+    try:
+        return op(a, b), np.zeros(len(a), dtype=bool)
+    except shapely.errors.GEOSException:
+        out = np.empty(len(a), dtype=object)
+        failed = np.zeros(len(a), dtype=bool)
+        for k in range(len(a)):
+            try:
+                out[k] = op(a[k], b[k])
+            except shapely.errors.GEOSException:
+                out[k], failed[k] = shapely.Polygon(), True
+        return out, failed
 
 
 def _polygonal(geoms: np.ndarray) -> np.ndarray:
@@ -637,6 +663,24 @@ def _polygonal(geoms: np.ndarray) -> np.ndarray:
     for k in np.nonzero(~np.isin(tid, (3, 6)))[0]:
         parts = [p for p in shapely.get_parts(geoms[k]) if shapely.get_type_id(p) in (3, 6)]
         out[k] = shapely.union_all(parts) if parts else shapely.Polygon()
+    return out
+
+
+def _clean(regions: np.ndarray) -> np.ndarray:
+    """Each region reduced to its polygons above the sliver area (valid, oriented)."""
+    parts, owner = _polygon_parts(regions)
+    return _group(parts, owner, len(regions))
+
+
+def _group(parts: np.ndarray, owner: np.ndarray, n: int) -> np.ndarray:
+    """Polygon ``parts`` gathered into one geometry per owner (empty where none)."""
+    out = np.array([shapely.Polygon() for _ in range(n)], dtype=object)
+    if len(parts):
+        keys, counts = np.unique(owner, return_counts=True)
+        parts = parts[np.argsort(owner, kind="stable")]
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        for k, s, c in zip(keys, starts, counts, strict=True):
+            out[k] = parts[s] if c == 1 else shapely.MultiPolygon(list(parts[s : s + c]))
     return out
 
 
@@ -701,8 +745,13 @@ def _typed_cells(
             has = np.array([g is not None for g in geoms], dtype=bool)
             touch = np.zeros(len(cand), dtype=bool)
             if has.any():
-                touch[has] = shapely.dwithin(
-                    geoms[has], shapely.points(mid[cand[has]]), BORDER_TOL_M
+                # both ends and the middle touch explored space across the border; the
+                # tolerance absorbs rounding that left the two sides' vertices apart
+                c, g = cand[has], geoms[has]
+                touch[has] = (
+                    shapely.dwithin(g, shapely.points(mid[c]), SECTOR_TOL_M)
+                    & shapely.dwithin(g, shapely.points(a[c]), SECTOR_TOL_M)
+                    & shapely.dwithin(g, shapely.points(b[c]), SECTOR_TOL_M)
                 )
             types[cand[touch]] = VectorType.SECTOR
 

@@ -19,6 +19,8 @@ settings.register_profile(  # HYPOTHESIS_PROFILE=thorough for a long local run
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
+np.set_printoptions(precision=17)  # failing examples must be reproducible from the report
+
 O, F, S = VectorType.OBSTACLE, VectorType.FRONTIER, VectorType.SECTOR
 
 
