@@ -88,3 +88,25 @@ def bench_format(
             ("bytes per vector", f"{res['bytes_per_vector']:.2f}"),
         ],
     )
+
+
+@bench_app.command("sim")
+def bench_sim(
+    as_json: bool = JSON_OPT,
+    world: str = typer.Option("data:maze", help="World to step (default: the largest)."),
+) -> None:
+    """Lidar scans per second, real-time factor against ray casting alone, memory."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import sim as simbench
+
+    with Console(stderr=True).status(f"stepping {world}"):
+        res = simbench.run(world)
+    rows = [(f"scans/s, {n} robot(s)", f"{v:.0f}") for n, v in res["scans_per_s"].items()]
+    rows += [
+        ("real-time factor, 3 robots", f"{res['real_time_factor_3_robots']:.1f}"),
+        ("ray casting only bound", f"{res['raycast_only_real_time_factor_3_robots']:.1f}"),
+        ("share of step not ray casting", f"{100 * res['non_raycast_fraction_3_robots']:.0f} %"),
+        ("peak memory", f"{res['peak_memory_mb']:.0f} MB"),
+    ]
+    _emit(res, as_json, f"simulator on {res['world']} ({res['beams']} beams)", rows)

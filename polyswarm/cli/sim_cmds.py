@@ -1,0 +1,86 @@
+"""``polyswarm sim``: run the simulator to look at it (the --serve bridge comes later)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from polyswarm.cli import app
+
+WORLD_HELP = (
+    "Procedural world (loop, cross, zigzag, maze, office, curves, rooms), "
+    "data:NAME (../shared/data/worlds), or a map_server .yaml."
+)
+
+
+@app.command("sim")
+def sim_cmd(
+    world: str = typer.Option("office", help=WORLD_HELP),
+    robots: int = typer.Option(1, min=1, help="Number of robots."),
+    duration: float = typer.Option(60.0, help="Simulated seconds to run."),
+    seed: int = typer.Option(0, help="Seed for noise, procedural maze and wandering."),
+    gui: bool = typer.Option(False, "--gui", help="Open the pybullet GUI (needs a display)."),
+    out: Path | None = typer.Option(None, help="Write a PNG of the world and trajectories here."),
+    config: Path | None = typer.Option(None, help="TOML config (the [sim] section is used)."),
+) -> None:
+    """Drive robots with a reactive wander controller and report what happened."""
+    import time
+
+    import numpy as np
+    from rich.console import Console
+    from rich.progress import Progress
+    from rich.table import Table
+
+    from polyswarm.config import load_config, with_overrides
+    from sim import Simulation, load_world
+    from sim.wander import Wander
+
+    cfg = with_overrides(load_config(config), {"sim": {"seed": seed}})
+    w = load_world(world, seed=seed)
+    trails: list[list] = [[] for _ in range(robots)]
+    t0 = time.perf_counter()
+    with Simulation(w, cfg.sim, robots, gui=gui) as sim:
+        ctl = [Wander(seed + k) for k in range(robots)]
+        with Progress(transient=True, console=Console(stderr=True)) as prog:
+            task = prog.add_task("simulating", total=duration)
+            for ev in sim.run(duration):
+                sim.set_cmd(ev.robot, *ctl[ev.robot].command(ev.scan))
+                trails[ev.robot].append(ev.true_pose[:2])
+                if gui:
+                    time.sleep(sim.cfg.lidar.rate_hz**-1 / max(robots, 1) / 4)
+                prog.update(task, completed=sim.time)
+        wall = time.perf_counter() - t0
+        table = Table(title=f"{w.name}: {duration:g} s simulated in {wall:.1f} s")
+        for col in ("robot", "distance m", "wall contacts", "robot contacts"):
+            table.add_column(col, justify="right")
+        for r in sim.robots:
+            table.add_row(
+                r.name, f"{r.distance_m:.1f}", str(r.wall_collisions), str(r.robot_collisions)
+            )
+        Console().print(table)
+    if out is not None:
+        plot_world(w, [np.array(t) for t in trails], out)
+        typer.echo(f"wrote {out}")
+
+
+def plot_world(world, trajectories, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import shapely
+
+    fig, ax = plt.subplots(figsize=(8, 8))
+    ax.set_facecolor("#9e9e9e")
+    for g in shapely.get_parts(world.free):
+        ax.fill(*g.exterior.xy, color="white")
+        for h in g.interiors:
+            ax.fill(*h.xy, color="#9e9e9e")
+    for t in trajectories:
+        if len(t) > 1:
+            ax.plot(t[:, 0], t[:, 1], linewidth=1)
+    ax.set_aspect("equal")
+    ax.set_title(world.name)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -1,0 +1,155 @@
+"""The simulator with real pybullet in DIRECT mode, on geometry checkable by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from polyswarm.config import SimConfig, with_overrides
+from polyswarm.data import WORLDS
+from polyswarm.errors import SimulationError
+from polyswarm.io.mapserver import read_map
+from sim import PROCEDURAL, Simulation, load_world, spread_start_poses
+from sim.world import _square, _walls_from_lines, _world_from_walls
+
+INNER = 0.1  # walls are 0.2 m thick around the 4 m square: inner faces 0.1 m inside
+
+
+def square_room():
+    return _world_from_walls("square", _walls_from_lines([_square(0, 0, 4, 4)], 0.2), (2.0, 2.0))
+
+
+def cfg(**over) -> SimConfig:
+    from polyswarm.config import Config
+
+    return with_overrides(Config(), {"sim": over}).sim
+
+
+def test_square_room_gives_the_analytic_ranges():
+    with Simulation(square_room(), cfg(), 1, start_poses=[(2.0, 2.0, 0.3)]) as sim:
+        scan = next(iter(sim.run(0.2))).scan
+    a = scan.angles + 0.3  # beam directions in the world frame
+    half = 2.0 - INNER
+    expect = np.minimum(half / np.abs(np.cos(a)), half / np.abs(np.sin(a)))
+    err = scan.ranges - expect
+    assert abs(err.mean()) < 0.002  # zero-mean noise
+    assert 0.008 < err.std() < 0.012  # sigma 0.01 m
+    assert np.abs(err).max() < 6 * 0.01
+
+
+def test_beams_that_hit_nothing_are_inf_and_dropout_is_nan():
+    world = load_world("loop")
+    with Simulation(world, cfg(lidar={"range_max_m": 3.0, "dropout_prob": 0.2}), 1) as sim:
+        r = next(iter(sim.run(0.2))).scan.ranges
+    assert np.isinf(r).any()  # the corridor is longer than 3 m
+    assert 0.1 < np.isnan(r).mean() < 0.3
+
+
+def test_two_robots_see_each_other():
+    poses = [(1.0, 2.0, 0.0), (3.0, 2.0, math.pi)]
+    with Simulation(square_room(), cfg(lidar={"noise_sigma_m": 0.0}), 2, start_poses=poses) as sim:
+        events = list(sim.run(0.1))
+    for ev in events:
+        ahead = ev.scan.ranges[np.argmin(np.abs(ev.scan.angles))]
+        assert ahead == pytest.approx(2.0 - 0.2, abs=1e-3)  # centre distance minus radius
+
+
+def test_a_robot_driven_into_a_wall_stops_there():
+    with Simulation(square_room(), cfg(), 1, start_poses=[(2.0, 2.0, 0.0)]) as sim:
+        sim.set_cmd(0, 0.5, 0.0)
+        for _ in sim.run(10.0):
+            pass
+        r = sim.robots[0]
+    wall_face = 4.0 - INNER
+    assert wall_face - 0.2 - 0.02 < r.pose[0] <= wall_face - 0.2  # touching, never through
+    assert r.wall_collisions == 1 and len(sim.collisions) == 1
+    assert sim.collisions[0].with_robot is None
+
+
+def test_robots_driving_into_each_other_stop_and_report_it():
+    poses = [(1.0, 2.0, 0.0), (3.0, 2.0, math.pi)]
+    with Simulation(square_room(), cfg(), 2, start_poses=poses) as sim:
+        sim.set_cmd(0, 0.5, 0.0)
+        sim.set_cmd(1, 0.5, 0.0)
+        for _ in sim.run(5.0):
+            pass
+        a, b = sim.robots
+    assert math.hypot(*(a.pose[:2] - b.pose[:2])) >= 0.4
+    assert a.robot_collisions + b.robot_collisions >= 1
+
+
+def test_velocity_commands_are_limited():
+    with Simulation(square_room(), cfg(), 1, start_poses=[(1.0, 1.0, 0.0)]) as sim:
+        sim.set_cmd(0, 5.0, 0.0)
+        for _ in sim.run(2.0):
+            pass
+        assert sim.robots[0].v == pytest.approx(sim.cfg.robot.max_linear_mps)
+        with pytest.raises(SimulationError):
+            sim.set_cmd(0, math.nan, 0.0)
+
+
+def test_noise_free_odometry_matches_the_motion():
+    quiet = cfg(
+        odometry_noise={
+            "trans_sigma_per_sqrt_m": 0.0,
+            "lateral_sigma_per_sqrt_m": 0.0,
+            "rot_sigma_per_sqrt_rad": 0.0,
+            "rot_sigma_per_sqrt_m": 0.0,
+        }
+    )
+    with Simulation(square_room(), quiet, 1, start_poses=[(1.0, 1.0, 0.5)]) as sim:
+        sim.set_cmd(0, 0.3, 0.4)
+        ev = list(sim.run(3.0))[-1]
+    x0, y0, t0 = 1.0, 1.0, 0.5
+    dx, dy = ev.true_pose[0] - x0, ev.true_pose[1] - y0
+    rel = (math.cos(t0) * dx + math.sin(t0) * dy, -math.sin(t0) * dx + math.cos(t0) * dy)
+    assert ev.odom[:2] == pytest.approx(rel, abs=1e-9)
+    assert ev.odom[2] == pytest.approx(ev.true_pose[2] - t0, abs=1e-9)
+
+
+def _run(seed: int):
+    with Simulation(load_world("office"), cfg(seed=seed), 3) as sim:
+        for k in range(3):
+            sim.set_cmd(k, 0.4, 0.2 * (k - 1))
+        ev = list(sim.run(4.0))
+    return np.concatenate([e.scan.ranges for e in ev]), np.concatenate([e.odom for e in ev])
+
+
+def test_a_seed_reproduces_a_run_bit_for_bit():
+    a, b, c = _run(5), _run(5), _run(6)
+    assert np.array_equal(a[0], b[0], equal_nan=True) and np.array_equal(a[1], b[1])
+    assert not np.array_equal(a[0], c[0], equal_nan=True)
+
+
+@pytest.mark.parametrize("name", PROCEDURAL)
+def test_procedural_worlds_are_closed_and_have_room_to_start(name):
+    w = load_world(name)
+    assert w.free.area > 20.0
+    poses = spread_start_poses(w, 3, 0.2)
+    assert len(poses) == 3
+    for i, p in enumerate(poses):
+        for q in poses[i + 1 :]:
+            assert math.hypot(p[0] - q[0], p[1] - q[1]) >= 0.4
+
+
+@pytest.mark.parametrize("world", WORLDS)
+def test_data_worlds_wall_boxes_cover_every_occupied_pixel_and_no_free_one(shared_data, world):
+    grid = read_map(shared_data / "worlds" / f"{world}.yaml")
+    w = load_world(shared_data / "worlds" / f"{world}.yaml")
+    res, (ox, oy) = grid.resolution, grid.origin
+    cover = np.zeros(grid.shape, dtype=np.int32)
+    for x0, y0, x1, y1 in w.boxes:
+        c0, c1 = round((x0 - ox) / res), round((x1 - ox) / res)
+        r0, r1 = round((y0 - oy) / res), round((y1 - oy) / res)
+        cover[r0:r1, c0:c1] += 1
+    assert (cover[grid.occupied] >= 1).all()
+    assert (cover[grid.free] == 0).all()
+    assert (cover <= 1).all()  # boxes do not overlap
+    assert len(w.boxes) < grid.occupied.sum() / 5  # neighbouring pixels merged
+
+
+def test_the_start_must_be_free():
+    with pytest.raises(SimulationError):
+        Simulation(square_room(), cfg(), 1, start_poses=[(0.05, 2.0, 0.0)])
