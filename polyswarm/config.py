@@ -94,19 +94,33 @@ class RefineConfig:
     score_c: float = 0.001
     flat_angle_deg: float = 15.0  # below this, chains meet at a flat angle: no intersection
     flat_merge_distance_m: float = 0.01  # projections closer than this are averaged
+    # > 0: scan points farther than this from the result are pinned (visited by the
+    # polygon). Off for mapping: pinning 3-sigma noise points makes spikes that bias ICP.
+    max_point_error_m: float = 0.0
 
 
 @dataclass(frozen=True)
 class IcpConfig:
     max_iterations: int = 30
     outlier_start_m: float = 0.5  # initial outlier threshold (thesis Table 5.3: 0.2 - 1.0)
-    outlier_end_m: float = 0.1  # threshold after shrinking
-    shrink: float = 0.75  # threshold multiplied by this every iteration
+    outlier_end_m: float = 0.03  # threshold after shrinking (3 sigma of the thesis' lidar)
+    shrink: float = 0.6  # threshold multiplied by this every iteration
     tolerance_m: float = 1e-4  # converged when the update moves points less than this
     backface_culling: bool = True
     sample_spacing_m: float = 0.05  # map obstacle vectors sampled at this spacing for search
     degeneracy_ratio: float = 0.02  # eigenvalue ratio below which an axis is unconstrained
     map_radius_m: float = 32.0  # obstacle vectors farther than this from the robot are ignored
+    rotation_search_rad: float = 0.35  # heading pre-alignment by wall directions (0: off)
+
+
+@dataclass(frozen=True)
+class LidarMount:
+    """Where the lidar sits on the robot (robot frame), and whether it is upside down."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    yaw_rad: float = 0.0
+    upside_down: bool = False  # mirrored scans: beam angles run clockwise
 
 
 @dataclass(frozen=True)
@@ -114,9 +128,15 @@ class SlamConfig:
     keyframe_distance_m: float = 0.4
     keyframe_angle_rad: float = 0.3490658503988659  # 20 degrees
     frontier_range_m: float = 0.2  # invalid beams become frontier points at this range
-    obstacle_max_gap_m: float = 0.5  # consecutive points farther apart become a frontier
+    # merging keyframes (polyswarm.polymap.MergeOptions)
+    notch_fill_m: float = 0.01  # walls smoothed across keyframes: notches this shallow filled
+    min_growth_m: float = 0.05  # new explored space thinner than this is noise along walls
+    obstacle_snap_m: float = 0.05  # a frontier this close along a wall is that wall
+    obstacle_max_gap_m: float = 0.5  # consecutive points farther apart become a frontier...
+    obstacle_gap_beams: float = 4.0  # ...unless within this many beam spacings at their range
     icp: IcpConfig = field(default_factory=IcpConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)
+    mount: LidarMount = field(default_factory=LidarMount)
 
 
 @dataclass(frozen=True)
