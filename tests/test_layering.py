@@ -11,7 +11,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMAND = ("polyswarm.cli", "polyswarm.benchmarks")
+COMMAND = ("polyswarm.cli", "polyswarm.benchmarks", "polyswarm.runners")
 
 
 def imports(path: Path) -> set[str]:

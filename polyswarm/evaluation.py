@@ -1,0 +1,104 @@
+"""Trajectory and map accuracy metrics (pure functions, no I/O).
+
+ate_rmse(est, ref)                 absolute trajectory error after SE(2) alignment
+rpe(est, ref, 1.0)                 relative pose error over 1 m of travel
+max_errors(est, ref)               largest translation / rotation error (same frame)
+map_iou(explored, truth)           intersection over union of free space
+wall_distance(starts, ends, walls) mean distance of obstacle vectors to true walls
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+
+from polyswarm.se2 import relative_many, wrap
+
+
+def align_se2(est_xy: np.ndarray, ref_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation R and translation t minimising |R est + t - ref| (no scale)."""
+    me, mr = est_xy.mean(axis=0), ref_xy.mean(axis=0)
+    H = (est_xy - me).T @ (ref_xy - mr)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.diag([1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return R, mr - R @ me
+
+
+def ate_rmse(est: np.ndarray, ref: np.ndarray, align: bool = True) -> float:
+    e, r = np.asarray(est)[:, :2], np.asarray(ref)[:, :2]
+    if align and len(e) >= 2:
+        R, t = align_se2(e, r)
+        e = e @ R.T + t
+    return float(np.sqrt(np.mean(np.sum((e - r) ** 2, axis=1))))
+
+
+def travelled(ref: np.ndarray) -> np.ndarray:
+    """Cumulative distance along a trajectory."""
+    step = np.hypot(*np.diff(np.asarray(ref)[:, :2], axis=0).T)
+    return np.concatenate([[0.0], np.cumsum(step)])
+
+
+def rpe(est: np.ndarray, ref: np.ndarray, delta_m: float) -> dict:
+    """Relative pose error over pose pairs ``delta_m`` of reference travel apart."""
+    cum = travelled(ref)
+    i = np.arange(len(cum))
+    j = np.searchsorted(cum, cum + delta_m)
+    ok = j < len(cum)
+    i, j = i[ok], j[ok]
+    if len(i) == 0:
+        return {
+            "trans_mean_m": math.nan,
+            "trans_std_m": math.nan,
+            "rot_mean_deg": math.nan,
+            "rot_std_deg": math.nan,
+            "pairs": 0,
+        }
+    dr = relative_many(ref[i], ref[j])
+    de = relative_many(est[i], est[j])
+    err = relative_many(dr, de)
+    t = np.hypot(err[:, 0], err[:, 1])
+    r = np.degrees(np.abs(err[:, 2]))
+    return {
+        "trans_mean_m": float(t.mean()),
+        "trans_std_m": float(t.std()),
+        "rot_mean_deg": float(r.mean()),
+        "rot_std_deg": float(r.std()),
+        "pairs": len(i),
+    }
+
+
+def max_errors(est: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
+    """Largest translational (m) and rotational (deg) error, frames as given."""
+    est, ref = np.asarray(est), np.asarray(ref)
+    t = np.hypot(est[:, 0] - ref[:, 0], est[:, 1] - ref[:, 1])
+    r = np.degrees(np.abs(wrap(est[:, 2] - ref[:, 2])))
+    return float(t.max()), float(r.max())
+
+
+def map_iou(explored: shapely.Geometry, truth: shapely.Geometry) -> float:
+    inter = shapely.intersection(explored, truth, grid_size=1e-6).area
+    union = shapely.union(explored, truth, grid_size=1e-6).area
+    return float(inter / union) if union > 0 else math.nan
+
+
+def wall_distance(
+    starts: np.ndarray, ends: np.ndarray, wall_starts, wall_ends, step_m: float = 0.05
+) -> float:
+    """Mean distance (m) from points every ``step_m`` along obstacle vectors to the walls."""
+    if len(starts) == 0:
+        return math.nan
+    d = ends - starts
+    L = np.hypot(d[:, 0], d[:, 1])
+    n = np.maximum(1, np.ceil(L / step_m).astype(int))
+    owner = np.repeat(np.arange(len(starts)), n)
+    first = np.cumsum(n) - n
+    t = (np.arange(len(owner)) - first[owner] + 0.5) / n[owner]
+    pts = starts[owner] + t[:, None] * d[owner]
+    walls = shapely.STRtree(shapely.linestrings(np.stack([wall_starts, wall_ends], axis=1)))
+    idx = walls.nearest(shapely.points(pts))
+    dist = shapely.distance(shapely.points(pts), walls.geometries[idx])
+    w = np.repeat(L / n, n)  # weight by length represented
+    return float(np.sum(dist * w) / np.sum(w))

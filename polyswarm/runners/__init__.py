@@ -1,0 +1,1 @@
+"""Experiment runners behind commands (command layer: may drive the simulator)."""

@@ -1,0 +1,226 @@
+"""Single-robot PolySLAM runs: on a CARMEN log, or on a simulated world.
+
+Part of the command layer (it drives the simulator). Each run yields a ``SlamRun``
+with the estimated, reference and odometry trajectories, the map and timings;
+``write_outputs`` writes the run folder and returns the metrics.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from polyswarm import evaluation as ev
+from polyswarm.config import Config, config_to_dict, save_config, with_overrides
+from polyswarm.io.carmen import read_carmen
+from polyswarm.io.tum import write_tum
+from polyswarm.odometry import IncrementNoise, noisy_odometry
+from polyswarm.polymap import GridPolyMap, VectorType
+from polyswarm.se2 import compose
+from polyswarm.slam import PolySlam
+
+Progress = Callable[[float, float], None]  # (done, total)
+
+
+@dataclass
+class SlamRun:
+    name: str
+    stamps: np.ndarray
+    estimate: np.ndarray
+    reference: np.ndarray  # ground truth (simulation) or the log's corrected poses
+    odometry: np.ndarray  # the noisy odometry the SLAM consumed, in the map frame
+    slam: PolySlam
+    keyframe_ms: list[float]
+    processing_s: float  # time spent in PolySlam.process
+    stream_s: float  # duration of the data stream (simulated or log time)
+    simulated: bool
+    info: dict = field(default_factory=dict)
+    world: object | None = None  # sim.World for simulated runs
+
+    @property
+    def map(self) -> GridPolyMap:
+        return self.slam.map
+
+
+def run_log(
+    path: str | Path,
+    cfg: Config,
+    noise: IncrementNoise = IncrementNoise(),
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> SlamRun:
+    log = read_carmen(path)
+    ref = log.reference
+    odom = noisy_odometry(ref, noise, seed)
+    slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=ref[0])
+    est, kf_ms = [], []
+    spent = 0.0
+    for k, s in enumerate(log.scans):
+        t0 = time.perf_counter()
+        step = slam.process(s.scan, odom[k])
+        spent += time.perf_counter() - t0
+        est.append(step.pose)
+        if step.keyframe:
+            kf_ms.append(step.timings_ms["total"])
+        if progress:
+            progress(k + 1, len(log.scans))
+    stamps = np.array([s.stamp for s in log.scans])
+    return SlamRun(
+        Path(path).name.split(".")[0],
+        stamps,
+        np.array(est),
+        ref,
+        odom,
+        slam,
+        kf_ms,
+        spent,
+        float(stamps[-1] - stamps[0]) if len(stamps) > 1 else 0.0,
+        False,
+        {
+            "log": str(path),
+            "scans": len(log.scans),
+            "timestamps": "synthesized (scan index x 1 s)"
+            if log.timestamps_synthesized
+            else "from the log",
+            "odometry_noise": noise.describe(),
+            "seed": seed,
+            "reference": "the log's corrected poses (gmapping), good to a few centimetres",
+        },
+    )
+
+
+def run_world(
+    world_spec: str,
+    cfg: Config,
+    seed: int = 0,
+    speed_mps: float = 1.0,
+    progress: Progress | None = None,
+    route=None,
+) -> SlamRun:
+    from sim import Simulation, load_world
+    from sim.route import PurePursuit, coverage_route, route_length
+
+    cfg = with_overrides(
+        cfg,
+        {
+            "sim": {
+                "seed": seed,
+                "robot": {"max_linear_mps": max(speed_mps, cfg.sim.robot.max_linear_mps)},
+            }
+        },
+    )
+    world = load_world(world_spec, seed=seed)
+    route = coverage_route(world) if route is None else np.asarray(route, dtype=float)
+    heading = math.atan2(route[1, 1] - route[0, 1], route[1, 0] - route[0, 0])
+    start = (float(route[0, 0]), float(route[0, 1]), heading)
+    total = route_length(route)
+    stamps, est, gt, odo, kf_ms = [], [], [], [], []
+    spent = 0.0
+    with Simulation(world, cfg.sim, 1, start_poses=[start]) as sim:
+        follower = PurePursuit(route, speed=speed_mps)
+        slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=start)
+        limit_s = 3.0 * total / speed_mps + 120.0  # a stuck robot must not run forever
+        while not follower.done and sim.time < limit_s:
+            for e in sim.step():
+                t0 = time.perf_counter()
+                step = slam.process(e.scan, e.odom)
+                spent += time.perf_counter() - t0
+                stamps.append(e.scan.stamp)
+                est.append(step.pose)
+                gt.append(e.true_pose)
+                odo.append(compose(start, e.odom))  # in the map frame, for the baseline
+                if step.keyframe:
+                    kf_ms.append(step.timings_ms["total"])
+            sim.set_cmd(0, *follower.command(sim.robots[0].pose))
+            if progress:
+                progress(min(follower.progress, total), total)
+        collisions = sim.robots[0].wall_collisions
+        sim_s = sim.time
+    return SlamRun(
+        world.name,
+        np.array(stamps),
+        np.array(est),
+        np.array(gt),
+        np.array(odo),
+        slam,
+        kf_ms,
+        spent,
+        sim_s,
+        True,
+        {
+            "world": world_spec,
+            "route_m": total,
+            "route_finished": bool(follower.done),
+            "wall_contacts": collisions,
+            "seed": seed,
+            "speed_mps": speed_mps,
+            "odometry_noise": config_to_dict(cfg.sim.odometry_noise),
+        },
+        world,
+    )
+
+
+def metrics(run: SlamRun) -> dict:
+    est, ref = run.estimate, run.reference
+    t_max, r_max = ev.max_errors(est, ref)
+    dist = float(ev.travelled(ref)[-1])
+    r1, r10 = ev.rpe(est, ref, 1.0), ev.rpe(est, ref, 10.0)
+    kf = np.array(run.keyframe_ms) if run.keyframe_ms else np.array([math.nan])
+    out = {
+        "ate_rmse_m": ev.ate_rmse(est, ref),
+        "odometry_ate_rmse_m": ev.ate_rmse(run.odometry, ref),
+        "rpe_1m_trans_mean_m": r1["trans_mean_m"],
+        "rpe_1m_trans_std_m": r1["trans_std_m"],
+        "rpe_1m_rot_mean_deg": r1["rot_mean_deg"],
+        "rpe_10m_trans_mean_m": r10["trans_mean_m"],
+        "rpe_10m_trans_std_m": r10["trans_std_m"],
+        "rpe_10m_rot_mean_deg": r10["rot_mean_deg"],
+        "max_trans_error_m": t_max,
+        "max_rot_error_deg": r_max,
+        "distance_travelled_m": dist,
+        "max_trans_error_ratio": t_max / dist if dist > 0 else math.nan,
+        "vectors": int(sum(run.map.vector_counts().values())),
+        "vectors_by_type": run.map.vector_counts(),
+        "polygons": run.map.polygon_count(),
+        "polygons_whole_map": len(run.map.dissolve()),
+        "keyframes": run.slam.keyframes,
+        "keyframe_p50_ms": float(np.nanmedian(kf)),
+        "keyframe_p95_ms": float(np.nanpercentile(kf, 95)),
+        "realtime_factor": run.stream_s / run.processing_s if run.processing_s > 0 else math.inf,
+        "degenerate_keyframes": run.slam.degenerate_keyframes,
+        "rejected_keyframes": run.slam.rejected_keyframes,
+        **run.info,
+    }
+    if run.simulated and run.world is not None:
+        w = run.world
+        out["map_iou"] = ev.map_iou(run.map.explored_region(), w.free)
+        s, e, _ = run.map.vectors([VectorType.OBSTACLE])
+        ws, we = w.wall_segments
+        out["wall_distance_mean_m"] = ev.wall_distance(s, e, ws, we)
+    return out
+
+
+def write_outputs(run: SlamRun, out: str | Path, cfg: Config) -> dict:
+    from polyswarm.io.export import export_map
+    from protocols.files import write_polymap
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    m = metrics(run)
+    write_polymap(run.map, out / "map.polymap")
+    export_map(run.map, out / "map.svg", trajectories=[run.estimate[:, :2]])
+    export_map(run.map, out / "map.png", trajectories=[run.estimate[:, :2]])
+    write_tum(out / "trajectory.tum", run.stamps, run.estimate)
+    write_tum(
+        out / ("ground_truth.tum" if run.simulated else "reference.tum"), run.stamps, run.reference
+    )
+    write_tum(out / "odometry.tum", run.stamps, run.odometry)
+    save_config(cfg, out / "config.toml")
+    (out / "metrics.json").write_text(json.dumps(m, indent=2, default=float))
+    return m

@@ -1,0 +1,117 @@
+"""CARMEN logs, TUM files, odometry noise and trajectory metrics."""
+
+from __future__ import annotations
+
+import gzip
+import math
+
+import numpy as np
+import pytest
+
+from polyswarm.errors import DataFormatError
+from polyswarm.evaluation import align_se2, ate_rmse, max_errors, rpe, travelled
+from polyswarm.io.carmen import read_carmen
+from polyswarm.io.tum import read_tum, write_tum
+from polyswarm.odometry import IncrementNoise, noisy_odometry
+from polyswarm.se2 import compose, wrap
+
+LOG = """# CARMEN Logfile
+PARAM robot_front_laser_max 30.0 nohost 0
+PARAM laser_front_laser_fov 3.14159 nohost 0
+ODOM 0.0 0.0 0.0 0.1 0.0 0.0 1.0 host 1.0
+SOMETHING unknown line with words
+FLASER 5 1.0 2.0 30.0 3.0 4.0 0.5 0.5 0.1 0.5 0.5 0.1 10.0 host 10.0
+FLASER 5 1.0 2.0 3.0 3.0 4.0 1.5 0.5 0.1 1.5 0.5 0.1 11.0 host 11.0
+ROBOTLASER1 0 -1.5708 3.14159 0.785398 30.0 0.01 0 5 1.0 1.0 1.0 1.0 1.0 0 \
+2.5 0.5 0.2 2.5 0.5 0.2 0 0 0 0 0 12.0 host 12.0
+"""
+
+
+def test_reads_flaser_robotlaser_odom_and_params(tmp_path):
+    p = tmp_path / "a.log.gz"
+    with gzip.open(p, "wt") as f:
+        f.write(LOG)
+    log = read_carmen(p)
+    assert len(log.scans) == 3 and log.odometry.shape == (1, 4)
+    s = log.scans[0]
+    assert s.scan.range_max == 30.0
+    assert s.scan.angle_min == pytest.approx(-math.pi / 2, abs=1e-5)
+    assert s.scan.angle_increment == pytest.approx(math.pi / 4, abs=1e-5)  # odd count
+    assert np.allclose(s.pose, [0.5, 0.5, 0.1])
+    assert math.isclose(s.stamp, 10.0) and not log.timestamps_synthesized
+    assert log.scans[2].scan.angle_increment == pytest.approx(0.785398)
+    assert np.allclose(log.scans[2].pose, [2.5, 0.5, 0.2])
+
+
+@pytest.mark.parametrize(
+    ("line", "match"),
+    [
+        ("FLASER x 1 2", "bad count"),
+        ("FLASER 3 1.0 2.0", "needs"),
+        ("FLASER 2 1.0 abc 0 0 0 0 0 0 1 h 1", "ranges"),
+        ("ODOM 1 2", "ODOM"),
+        ("FLASER 2 1.0 nan 0 0 0 0 0 0 1 h 1", "non-finite"),
+    ],
+)
+def test_malformed_lines_name_their_line_number(tmp_path, line, match):
+    p = tmp_path / "b.log"
+    p.write_text("# header\nPARAM a b\n" + line + "\n")
+    with pytest.raises(DataFormatError, match=f"line 3: .*{match}"):
+        read_carmen(p)
+
+
+def test_useless_timestamps_are_synthesized(tmp_path):
+    lines = [f"FLASER 3 1 1 1 {k} 0 0 {k} 0 0 0.0 h 0.0" for k in range(4)]
+    p = tmp_path / "c.log"
+    p.write_text("\n".join(lines) + "\n")
+    log = read_carmen(p)
+    assert log.timestamps_synthesized
+    assert [s.stamp for s in log.scans] == [0.0, 1.0, 2.0, 3.0]
+
+
+def test_tum_round_trip(tmp_path):
+    poses = np.array([[0, 0, 0], [1, 2, 0.5], [3, -1, -2.0]])
+    write_tum(tmp_path / "t.tum", np.array([0.0, 1.0, 2.0]), poses)
+    t, back = read_tum(tmp_path / "t.tum")
+    assert np.allclose(back, poses, atol=1e-6) and np.allclose(t, [0, 1, 2])
+
+
+def circle_trajectory(n=200):
+    a = np.linspace(0, 2 * np.pi, n)
+    return np.stack([5 * np.cos(a), 5 * np.sin(a), wrap(a + np.pi / 2)], axis=1)
+
+
+def test_ate_is_zero_for_a_moved_copy_and_alignment_recovers_it():
+    ref = circle_trajectory()
+    moved = np.array([compose((3.0, -2.0, 0.7), p) for p in ref])
+    R, t = align_se2(moved[:, :2], ref[:, :2])
+    assert np.allclose(moved[:, :2] @ R.T + t, ref[:, :2], atol=1e-9)
+    assert ate_rmse(moved, ref) == pytest.approx(0.0, abs=1e-9)
+    assert ate_rmse(moved, ref, align=False) > 1.0
+
+
+def test_rpe_and_max_errors():
+    ref = circle_trajectory()
+    assert rpe(ref, ref, 1.0)["trans_mean_m"] == pytest.approx(0.0, abs=1e-12)
+    est = ref.copy()
+    est[:, 0] += 0.1
+    assert max_errors(est, ref) == pytest.approx((0.1, 0.0))
+    assert travelled(ref)[-1] == pytest.approx(2 * np.pi * 5, rel=1e-3)
+
+
+def test_odometry_noise_is_seeded_and_zero_noise_is_exact():
+    ref = circle_trajectory()
+    quiet = noisy_odometry(ref, IncrementNoise(0, 0, 0, 0), seed=1)
+    assert np.allclose(quiet, ref, atol=1e-9)
+    a, b = noisy_odometry(ref, IncrementNoise(), 4), noisy_odometry(ref, IncrementNoise(), 4)
+    assert np.array_equal(a, b)
+    assert ate_rmse(a, ref, align=False) > 0.05
+
+
+def test_shared_logs_have_the_documented_scan_counts(shared_data):
+    counts = {"aces": 440, "csail": 406, "freiburg-101": 292, "orebro": 237}
+    for name, n in counts.items():
+        log = read_carmen(shared_data / "logs" / f"{name}-corrected.log.gz")
+        assert len(log.scans) == n
+        inc = log.scans[0].scan.angle_increment
+        assert math.degrees(inc) in (pytest.approx(1.0, abs=1e-3), pytest.approx(0.5, abs=1e-3))

@@ -1,0 +1,61 @@
+"""The PolySLAM pipeline, end to end on a small simulated world (real pybullet)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from polyswarm.config import Config
+from polyswarm.evaluation import map_iou
+from polyswarm.runners.slam import metrics, run_world
+from polyswarm.slam import KeyframeSelector, PolySlam
+from sim import Simulation, load_world
+
+
+def test_keyframe_selector_distance_and_angle():
+    sel = KeyframeSelector(0.4, np.radians(20))
+    assert sel.due(np.zeros(3))
+    sel.mark(np.zeros(3))
+    assert not sel.due(np.array([0.3, 0.0, 0.0]))
+    assert sel.due(np.array([0.41, 0.0, 0.0]))
+    assert not sel.due(np.array([0.0, 0.0, np.radians(19)]))
+    assert sel.due(np.array([0.0, 0.0, np.radians(21)]))
+
+
+def test_only_keyframes_carry_deltas():
+    cfg = Config()
+    w = load_world("rooms")
+    with Simulation(w, cfg.sim, 1) as sim:
+        slam = PolySlam(cfg.slam, cfg.map.cell_size_m, sim.robots[0].pose)
+        sim.set_cmd(0, 0.3, 0.0)
+        steps = [slam.process(e.scan, e.odom) for e in sim.run(3.0)]
+    kf = [s for s in steps if s.keyframe]
+    assert steps[0].keyframe and steps[0].delta is not None
+    assert 2 <= len(kf) <= 4  # 0.9 m driven, a keyframe every 0.4 m
+    assert all(s.delta is None for s in steps if not s.keyframe)
+    versions = [s.delta.version for s in kf if s.delta]
+    assert versions == sorted(versions)
+
+
+@pytest.fixture(scope="module")
+def rooms_run():
+    return run_world("rooms", Config(), seed=3)
+
+
+def test_simulated_run_is_accurate_and_maps_the_world(rooms_run):
+    m = metrics(rooms_run)
+    assert rooms_run.info["route_finished"]
+    assert m["max_trans_error_m"] < 0.10
+    assert m["max_rot_error_deg"] < 1.5
+    assert m["ate_rmse_m"] < m["odometry_ate_rmse_m"]
+    assert m["map_iou"] > 0.9
+    assert m["wall_distance_mean_m"] < 0.05
+    assert rooms_run.slam.rejected_keyframes == 0
+
+
+def test_map_explored_space_only_inside_the_world(rooms_run):
+    w = rooms_run.world
+    explored = rooms_run.map.explored_region()
+    outside = explored.difference(w.free.buffer(0.1)).area
+    assert outside < 0.01 * explored.area
+    assert map_iou(explored, w.free) > 0.9
