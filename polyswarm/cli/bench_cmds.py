@@ -110,3 +110,47 @@ def bench_sim(
         ("peak memory", f"{res['peak_memory_mb']:.0f} MB"),
     ]
     _emit(res, as_json, f"simulator on {res['world']} ({res['beams']} beams)", rows)
+
+
+@bench_app.command("slam")
+def bench_slam(
+    as_json: bool = JSON_OPT,
+    worlds: str = typer.Option("loop,cross,zigzag,maze", help="Thesis worlds to drive through."),
+) -> None:
+    """PolySLAM on the thesis' worlds and the real logs; refinement; speed (minutes)."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import slam as slambench
+
+    console = Console(stderr=True)
+    with console.status("PolySLAM") as status:
+        res = slambench.run(
+            lambda what: status.update(f"PolySLAM: {what}"), tuple(worlds.split(","))
+        )
+    if as_json:
+        typer.echo(json.dumps(res, indent=2, default=float))
+        return
+    rows = []
+    for w, m in res["worlds"].items():
+        ours, thesis = 100 * m["max_trans_error_ratio"], 100 * m["thesis_max_trans_error_ratio"]
+        rows.append((f"{w}: max error / distance (thesis)", f"{ours:.3f} % ({thesis:.3f} %)"))
+        rows.append((f"{w}: map IoU, polygons", f"{m['map_iou']:.3f}, {m['polygons']}"))
+    for name, m in res["logs"].items():
+        rows.append(
+            (
+                f"log {name}: ATE (odometry)",
+                f"{m['ate_rmse_m']:.3f} m ({m['odometry_ate_rmse_m']:.3f} m)",
+            )
+        )
+    for name, m in res["refinement_curves"].items():
+        rows.append(
+            (
+                f"curves {name}: vectors, farthest point",
+                f"{m['vectors_max']}, {m['farthest_point_m_max']:.3f} m",
+            )
+        )
+    rows.append(
+        ("keyframe p50 / p95", f"{res['keyframe_p50_ms']:.1f} / {res['keyframe_p95_ms']:.1f} ms")
+    )
+    rows.append(("real-time factor (worst world)", f"{res['realtime_factor_min']:.1f} x"))
+    _emit(res, False, "PolySLAM", rows)
