@@ -149,41 +149,49 @@ def _signed_area(xy: np.ndarray) -> float:
 def _diagonalise(
     xy: np.ndarray, types: np.ndarray, tol: float, min_steps: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Replace staircases by a diagonal through their step midpoints (tol in cells)."""
+    """Replace staircases by a diagonal through their wall-side corners (tol in cells).
+
+    A staircase is a run of same-type unit steps alternating between two directions.
+    The diagonal joins its reflex corners (the corners of the non-free cells poking
+    into free space), so no part of a non-free cell ever becomes free space: planners
+    keep their clearance from the true walls. Free cells along the stair lose at most
+    a corner triangle; their centres stay on or inside the free side.
+    """
     n = len(xy)
     if n < min_steps + 2 or tol <= 0:
         return xy, types
-    nxt = np.roll(xy, -1, axis=0)
-    vec = nxt - xy
-    mids = 0.5 * (xy + nxt)
+    vec = np.roll(xy, -1, axis=0) - xy
     dirs = np.sign(vec).astype(np.int64)
-    out_xy, out_t = [], []
+    prev = np.roll(vec, 1, axis=0)
+    reflex = (prev[:, 0] * vec[:, 1] - prev[:, 1] * vec[:, 0]) < 0  # right turn at vertex k
+    keep = np.ones(n, dtype=bool)
     i = 0
-    while i < n:
+    while i < n - 1:
         j = i
-        # extend a staircase: same type, directions alternating between two axes
+        # extend a staircase of vectors i..j: one type, alternating between two axes
         while j + 1 < n and types[j + 1] == types[i]:
             if np.array_equal(dirs[j + 1], dirs[j]):
                 break
             if j + 1 - i >= 2 and not np.array_equal(dirs[j + 1], dirs[j - 1]):
                 break
-            a, b = mids[i], mids[j + 1]
+            j += 1
+        corners = [k for k in range(i + 1, j + 1) if reflex[k]]
+        while len(corners) >= min_steps // 2 + 1:
+            a, b = xy[corners[0]], xy[corners[-1]]
             ab = b - a
             L = math.hypot(*ab)
-            seg = mids[i : j + 2] - a
-            if L == 0 or np.max(np.abs(seg[:, 0] * ab[1] - seg[:, 1] * ab[0])) / L > tol:
+            inner = xy[corners[0] : corners[-1] + 1]
+            side = (inner[:, 0] - a[0]) * ab[1] - (inner[:, 1] - a[1]) * ab[0]  # >0: right
+            if (
+                L > 0
+                and np.all(np.abs(side[[k - corners[0] for k in corners]]) / L <= tol)
+                and np.all(side >= -1e-9)
+            ):
+                keep[corners[0] + 1 : corners[-1]] = False
                 break
-            j += 1
-        if j - i + 1 >= min_steps:
-            out_xy += [xy[i], mids[i], mids[j]]
-            out_t += [types[i]] * 3
-            i = j + 1
-            # the last step's second half starts at mids[j]: emitted as the third vector
-        else:
-            out_xy.append(xy[i])
-            out_t.append(types[i])
-            i += 1
-    return np.array(out_xy), np.array(out_t, dtype=np.uint8)
+            corners = corners[:-1]  # shorten the stair until it fits a line
+        i = max(j, i + 1)
+    return xy[keep], types[keep]
 
 
 def _assemble(rings, tol: float, min_steps: int):

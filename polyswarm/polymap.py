@@ -841,9 +841,9 @@ def _typed_cells(
     """Turn merged cell regions into cells of canonical typed rings.
 
     Every vector of a result ring is a piece of some input vector (GEOS keeps input
-    vertices), so its type is inherited: obstacle if it lies along a source obstacle
-    vector (obstacle wins over frontier); else sector if it lies on the cell border with
-    explored space across it; else frontier.
+    vertices), so its type is inherited: sector if it lies on the cell border with
+    explored space across it; else obstacle if it lies along a source obstacle vector
+    (obstacle wins over frontier); else frontier.
     """
     polys, poly_cell = _polygon_parts(regions)
     cell_ij = np.array(idxs, dtype=np.int64).reshape(-1, 2)
@@ -860,7 +860,9 @@ def _typed_cells(
             on(a[:, 1], y0 + cell_size) & on(b[:, 1], y0 + cell_size),
         )
         for side, (di, dj) in zip(sides, ((-1, 0), (1, 0), (0, -1), (0, 1)), strict=True):
-            cand = np.nonzero(side & (types != VectorType.OBSTACLE))[0]
+            # free space across the border makes a sector even where an obstacle vector
+            # once lay on the border: the wall was not there (both sides are free)
+            cand = np.nonzero(side)[0]
             if len(cand) == 0:
                 continue
             geoms = []

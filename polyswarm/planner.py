@@ -1,0 +1,358 @@
+"""Path planning on a PolyMap: A* over the topological graph, then a taut path.
+
+1. A* over the graph's nodes (convex pieces), moving from opening to opening, from
+   the piece holding the start to the piece holding the goal.
+2. The pieces found make a sleeve; its configuration space (the sleeve minus every
+   obstacle and frontier vector grown by the radius - grown by a circumscribed
+   polygon, so the clearance is never less than the radius) is triangulated. Start and
+   goal may be closer (the robot is there; a frontier goal lies at the frontier): they
+   join the nearest point of that space.
+3. A* over the triangles and the funnel algorithm (string pulling through the shared
+   edges) give the shortest path inside the sleeve: taut, and at least the radius from
+   every obstacle vector. The thesis' paths went from polygon centre to polygon centre
+   and were 29% longer than a grid planner's (its Table 4.2).
+
+    planner = Planner(pmap, graph)
+    path = planner.plan(start_xy, goal_xy)      # PlanningError if impossible
+    path.points, path.length_m
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+from dataclasses import dataclass
+
+import mapbox_earcut
+import numpy as np
+import shapely
+import shapely.ops
+
+from polyswarm.errors import PlanningError
+from polyswarm.navgraph import BOUNDARY, NavGraph, NodeId, node_of, piece_polygon
+from polyswarm.polymap import GridPolyMap
+
+BUFFER_SEGMENTS = 4  # quarter-circle segments of the grown obstacles
+MAX_SLEEVE_RETRIES = 4  # openings blocked by the exact check before giving up
+
+
+@dataclass(frozen=True)
+class Path:
+    points: np.ndarray  # (k, 2) metres
+    nodes: tuple[NodeId, ...]
+    expansions: int
+
+    @property
+    def length_m(self) -> float:
+        return (
+            float(np.hypot(*np.diff(self.points, axis=0).T).sum()) if len(self.points) > 1 else 0.0
+        )
+
+
+class Planner:
+    def __init__(self, pmap: GridPolyMap, graph: NavGraph) -> None:
+        self.map = pmap
+        self.graph = graph
+        self.radius = graph.radius
+
+    def plan(self, start, goal) -> Path:
+        start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+        s_node = node_of(self.map, *start)
+        if s_node is None:
+            raise PlanningError(f"start {tuple(start)} is not in explored free space")
+        g_node = node_of(self.map, *goal)
+        if g_node is None:
+            raise PlanningError(f"goal {tuple(goal)} is in unexplored space (or in an obstacle)")
+        blocked: set[tuple[NodeId, NodeId]] = set()
+        expansions = 0
+        for _ in range(MAX_SLEEVE_RETRIES + 1):
+            nodes, n_exp = self._astar(s_node, g_node, start, goal, blocked)
+            expansions += n_exp
+            if nodes is None:
+                raise PlanningError(
+                    f"no path from {tuple(start)} to {tuple(goal)} for radius {self.radius} m"
+                )
+            pts, bad = self._taut(nodes, start, goal)
+            if pts is not None:
+                return Path(pts, tuple(nodes), expansions)
+            blocked |= bad
+        raise PlanningError(
+            f"no path with {self.radius} m clearance from {tuple(start)} to {tuple(goal)}"
+        )
+
+    # -- 1. A* over the graph -------------------------------------------------------------
+
+    def _astar(self, s: NodeId, g: NodeId, start, goal, blocked):
+        if s == g:
+            return [s], 0
+        tie = itertools.count()
+        best = {s: 0.0}
+        pos = {s: start}
+        parent: dict[NodeId, NodeId] = {}
+        heap = [(float(np.hypot(*(goal - start))), next(tie), s)]
+        closed = set()
+        exp = 0
+        while heap:
+            _, _, n = heapq.heappop(heap)
+            if n in closed:
+                continue
+            if n == g:
+                out = [n]
+                while out[-1] != s:
+                    out.append(parent[out[-1]])
+                return out[::-1], exp
+            closed.add(n)
+            exp += 1
+            here = pos[n]
+            for m, portal in self.graph.neighbours(n):
+                if m in closed or (n, m) in blocked or (m, n) in blocked:
+                    continue
+                # enter m at the point of its opening closest to the straight line on
+                cross = _closest_on_segment(portal.a, portal.b, here, goal)
+                cost = best[n] + float(np.hypot(*(cross - here)))
+                if m == g:
+                    cost += float(np.hypot(*(goal - cross)))
+                if cost < best.get(m, math.inf):
+                    best[m] = cost
+                    pos[m] = cross
+                    parent[m] = n
+                    h = 0.0 if m == g else float(np.hypot(*(goal - cross)))
+                    heapq.heappush(heap, (cost + h, next(tie), m))
+        return None, exp
+
+    # -- 2./3. the taut path in the sleeve ------------------------------------------------
+
+    def _taut(self, nodes, start, goal):
+        polys = [shapely.Polygon(piece_polygon(self.map, n)) for n in nodes]
+        sleeve = shapely.union_all(polys, grid_size=1e-6)
+        x0, y0, x1, y1 = sleeve.bounds
+        r = self.radius
+        reach = r + 0.05
+        cells = [
+            (i, j)
+            for i in range(
+                math.floor((x0 - reach) / self.map.cell_size),
+                math.floor((x1 + reach) / self.map.cell_size) + 1,
+            )
+            for j in range(
+                math.floor((y0 - reach) / self.map.cell_size),
+                math.floor((y1 + reach) / self.map.cell_size) + 1,
+            )
+        ]
+        st, en, _ = self.map.vectors(BOUNDARY, cells)
+        r_out = r / math.cos(math.pi / (4 * BUFFER_SEGMENTS))  # circumscribed: never closer
+        free = sleeve
+        if len(st):
+            grown = shapely.buffer(
+                shapely.multilinestrings(np.stack([st, en], axis=1)),
+                r_out,
+                quad_segs=BUFFER_SEGMENTS,
+            )
+            free = shapely.difference(sleeve, grown, grid_size=1e-6)
+        part_s, s_eff = _component_and_entry(free, start)
+        part_g, g_eff = _component_and_entry(free, goal)
+        if part_s is None or part_g is None or not part_s.equals(part_g):
+            # the sleeve is cut by obstacles somewhere: block the narrowest opening
+            return None, _narrowest_openings(self.graph, nodes)
+        inner = shapely.set_precision(part_s, 1e-6)
+        tri_pts = _channel(inner, s_eff, g_eff)
+        if tri_pts is None:
+            return None, _narrowest_openings(self.graph, nodes)
+        pts = [start] if np.hypot(*(start - s_eff)) > 1e-9 else []
+        pts += list(tri_pts)
+        if np.hypot(*(goal - g_eff)) > 1e-9:
+            pts.append(goal)
+        return _dedupe(np.array(pts)), set()
+
+
+def _closest_on_segment(a, b, p, goal) -> np.ndarray:
+    """The point of opening a-b nearest to the line from p to the goal (clamped)."""
+    d = b - a
+    L2 = float(np.dot(d, d))
+    if L2 == 0:
+        return a.copy()
+    # intersect the line p->goal with the segment if possible, else nearest endpoint
+    v = goal - p
+    den = d[0] * v[1] - d[1] * v[0]
+    if abs(den) > 1e-12:
+        t = ((p[0] - a[0]) * v[1] - (p[1] - a[1]) * v[0]) / den
+        if 0.0 <= t <= 1.0:
+            return a + t * d
+    t = np.clip(np.dot(p - a, d) / L2, 0.0, 1.0)
+    return a + t * d
+
+
+def _narrowest_openings(graph: NavGraph, nodes) -> set:
+    worst, edge = math.inf, None
+    for a, b in itertools.pairwise(nodes):
+        for m, portal in graph.neighbours(a):
+            if m == b and portal.width < worst:
+                worst, edge = portal.width, (a, b)
+    return {edge} if edge else set()
+
+
+def _component_and_entry(free, p):
+    """The part of the free space holding p (or nearest to it) and a point in it."""
+    parts = [g for g in shapely.get_parts(free) if not g.is_empty and g.area > 1e-9]
+    if not parts:
+        return None, None
+    pt = shapely.Point(p)
+    for g in parts:
+        if g.covers(pt):
+            return g, np.asarray(p, dtype=float)
+    d = [g.distance(pt) for g in parts]
+    g = parts[int(np.argmin(d))]
+    if min(d) > 1.0:  # farther than a metre from any room for the robot
+        return None, None
+    q = np.asarray(shapely.ops.nearest_points(g, pt)[0].coords[0])
+    # step a millimetre inside, so the point is strictly in the free space
+    c = np.asarray(g.representative_point().coords[0])
+    q = q + 1e-3 * (c - q) / max(np.hypot(*(c - q)), 1e-12)
+    return g, q
+
+
+def _channel(poly: shapely.Polygon, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+    """Shortest path inside ``poly``: triangulate, A* over triangles, funnel."""
+    rings = [np.asarray(poly.exterior.coords)[:-1]] + [
+        np.asarray(r.coords)[:-1] for r in poly.interiors
+    ]
+    xy = np.concatenate(rings)
+    ends = np.cumsum([len(r) for r in rings]).astype(np.uint32)
+    tri = mapbox_earcut.triangulate_float64(xy, ends).astype(np.int64).reshape(-1, 3)
+    if len(tri) == 0:
+        return None
+    q = np.rint(xy * 1e6).astype(np.int64)
+    _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
+    tri = first[inv.ravel()][tri]
+    a, b, c = xy[tri[:, 0]], xy[tri[:, 1]], xy[tri[:, 2]]
+    ts, tg = _locate(a, b, c, start), _locate(a, b, c, goal)
+    if ts is None or tg is None:
+        return None
+    if ts == tg:
+        return np.array([start, goal])
+    edges: dict[tuple[int, int], list[int]] = {}
+    for k, t in enumerate(tri.tolist()):
+        for u, v in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            edges.setdefault((min(u, v), max(u, v)), []).append(k)
+    adj: dict[int, list[tuple[int, int, int]]] = {}
+    for (u, v), ks in edges.items():
+        if len(ks) == 2:
+            adj.setdefault(ks[0], []).append((ks[1], u, v))
+            adj.setdefault(ks[1], []).append((ks[0], u, v))
+    cent = (a + b + c) / 3.0
+    seq = _tri_astar(adj, cent, ts, tg, start, goal)
+    if seq is None:
+        return None
+    portals = [(start, start)]
+    for k in range(len(seq) - 1):
+        u, v = next((u, v) for m, u, v in adj[seq[k]] if m == seq[k + 1])
+        pu, pv = xy[u], xy[v]
+        d = cent[seq[k + 1]] - cent[seq[k]]
+        # left and right seen in the direction of travel
+        if d[0] * (pu[1] - cent[seq[k]][1]) - d[1] * (pu[0] - cent[seq[k]][0]) > 0:
+            portals.append((pu, pv))
+        else:
+            portals.append((pv, pu))
+    portals.append((goal, goal))
+    return funnel(portals)
+
+
+def _locate(a, b, c, p) -> int | None:
+    def cr(u, v):
+        return (v[:, 0] - u[:, 0]) * (p[1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (p[0] - u[:, 0])
+
+    d1, d2, d3 = cr(a, b), cr(b, c), cr(c, a)
+    inside = ((d1 >= -1e-12) & (d2 >= -1e-12) & (d3 >= -1e-12)) | (
+        (d1 <= 1e-12) & (d2 <= 1e-12) & (d3 <= 1e-12)
+    )
+    k = np.nonzero(inside)[0]
+    return int(k[0]) if len(k) else None
+
+
+def _tri_astar(adj, cent, s, g, start, goal):
+    tie = itertools.count()
+    best = {s: 0.0}
+    parent = {}
+    heap = [(0.0, next(tie), s)]
+    closed = set()
+    while heap:
+        _, _, n = heapq.heappop(heap)
+        if n == g:
+            out = [n]
+            while out[-1] != s:
+                out.append(parent[out[-1]])
+            return out[::-1]
+        if n in closed:
+            continue
+        closed.add(n)
+        here = start if n == s else cent[n]
+        for m, _, _ in adj.get(n, ()):
+            there = goal if m == g else cent[m]
+            cost = best[n] + float(np.hypot(*(there - here)))
+            if cost < best.get(m, math.inf):
+                best[m] = cost
+                parent[m] = n
+                heapq.heappush(heap, (cost + float(np.hypot(*(goal - there))), next(tie), m))
+    return None
+
+
+def _cross(o, a, b) -> float:
+    return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+
+def funnel(portals: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """The simple stupid funnel algorithm: taut path through (left, right) portals.
+
+    The first portal is (start, start), the last (goal, goal)."""
+    apex = portals[0][0]
+    left, right = portals[0]
+    ai = li = ri = 0
+    out = [apex]
+    i = 1
+    while i < len(portals):
+        pl, pr = portals[i]
+        # tighten the right side (right means clockwise of the apex direction)
+        if _cross(apex, right, pr) >= 0:  # pr is left of (or on) apex->right: narrower
+            if np.array_equal(apex, right) or _cross(apex, left, pr) < 0:
+                right, ri = pr, i
+            else:  # right crossed over left: left becomes a path corner
+                out.append(left)
+                apex, ai = left, li
+                left = right = apex
+                li = ri = ai
+                i = ai + 1
+                continue
+        if _cross(apex, left, pl) <= 0:  # pl is right of (or on) apex->left: narrower
+            if np.array_equal(apex, left) or _cross(apex, right, pl) > 0:
+                left, li = pl, i
+            else:
+                out.append(right)
+                apex, ai = right, ri
+                left = right = apex
+                li = ri = ai
+                i = ai + 1
+                continue
+        i += 1
+    if not np.array_equal(out[-1], portals[-1][0]):
+        out.append(portals[-1][0])
+    return np.array(out)
+
+
+def _dedupe(pts: np.ndarray) -> np.ndarray:
+    keep = np.ones(len(pts), dtype=bool)
+    keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-9
+    return pts[keep]
+
+
+def path_clearance(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> float:
+    """Smallest distance between a polyline and a set of segments."""
+    if len(points) < 2 or len(starts) == 0:
+        return math.inf
+    line = shapely.LineString(points)
+    segs = shapely.linestrings(np.stack([starts, ends], axis=1))
+    tree = shapely.STRtree(segs)
+    near = tree.query(line, predicate="dwithin", distance=5.0)
+    if len(near) == 0:
+        return math.inf
+    return float(shapely.distance(line, segs[near]).min())

@@ -1,0 +1,134 @@
+"""Navigation on PolyMaps: hand-checkable maps and a clearance property."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from polyswarm.errors import PlanningError
+from polyswarm.navgraph import NavGraph
+from polyswarm.planner import Planner, path_clearance
+from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
+from tests.conftest import O
+
+R = 0.25
+
+
+def l_corridor() -> GridPolyMap:
+    ring = Ring([(0, 0), (2, 0), (2, 8), (10, 8), (10, 10), (0, 10)], [O] * 6)
+    return GridPolyMap(2.0).merge(TypedPolygon(ring)).map
+
+
+def obstacles(pmap):
+    s, e, _ = pmap.vectors([VectorType.OBSTACLE])
+    return s, e
+
+
+def test_l_corridor_gives_the_known_shortest_path():
+    pmap = l_corridor()
+    graph = NavGraph.build(pmap, R)
+    path = Planner(pmap, graph).plan((1, 1), (9, 9))
+    # taut around the inner corner (2, 8): two tangents of sqrt(50 - R^2) and an arc of
+    # radius R over the 73.7 degree turn: 14.46 m (the zero-radius path is 14.14 m)
+    exact = 2 * math.sqrt(50 - R * R) + R * math.radians(73.74)
+    assert exact - 0.01 <= path.length_m <= exact + 0.03
+    assert path_clearance(path.points, *obstacles(pmap)) >= R - 1e-9
+    assert np.allclose(path.points[0], (1, 1)) and np.allclose(path.points[-1], (9, 9))
+
+
+def test_a_gap_narrower_than_the_robot_is_impassable():
+    # two rooms joined by a 0.4 m door (narrower than 2 x 0.25 m)
+    left = Ring(
+        [
+            (0, 0),
+            (3, 0),
+            (3, 1.8),
+            (3.5, 1.8),
+            (3.5, 0),
+            (6, 0),
+            (6, 4),
+            (3.5, 4),
+            (3.5, 2.2),
+            (3, 2.2),
+            (3, 4),
+            (0, 4),
+        ],
+        [O] * 12,
+    )
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(left)).map
+    graph = NavGraph.build(pmap, R)
+    with pytest.raises(PlanningError):
+        Planner(pmap, graph).plan((1, 2), (5, 2))
+    # a smaller robot fits
+    small = NavGraph.build(pmap, 0.15)
+    path = Planner(pmap, small).plan((1, 2), (5, 2))
+    assert path_clearance(path.points, *obstacles(pmap)) >= 0.15 - 1e-9
+
+
+def test_a_goal_in_unexplored_space_is_refused():
+    pmap = l_corridor()
+    planner = Planner(pmap, NavGraph.build(pmap, R))
+    with pytest.raises(PlanningError, match="unexplored"):
+        planner.plan((1, 1), (6, 4))
+    with pytest.raises(PlanningError, match="start"):
+        planner.plan((6, 4), (1, 1))
+
+
+def test_graph_is_much_smaller_than_the_pieces_and_updates_incrementally():
+    pmap = l_corridor()
+    graph = NavGraph.build(pmap, R)
+    assert 0 < graph.node_count <= graph.piece_count
+    bigger = pmap.merge(
+        TypedPolygon(Ring([(10, 8), (14, 8), (14, 10), (10, 10)], [O, O, O, VectorType.FRONTIER]))
+    ).map
+    changed = {c.index for c in bigger.delta_since(pmap.version).cells}
+    updated = NavGraph.build(pmap, R).update(bigger, changed)
+    fresh = NavGraph.build(bigger, R)
+    assert updated.node_count == fresh.node_count and updated.edge_count == fresh.edge_count
+    path = Planner(bigger, updated).plan((1, 1), (13, 9))
+    assert path.length_m > 2 * math.sqrt(50)
+
+
+@st.composite
+def rooms(draw):
+    """A random room with random box obstacles (pillars) inside."""
+    w, h = draw(st.floats(4, 9)), draw(st.floats(4, 9))
+    holes = []
+    for _ in range(draw(st.integers(0, 4))):
+        x, y = draw(st.floats(0.8, w - 1.6)), draw(st.floats(0.8, h - 1.6))
+        s = draw(st.floats(0.2, 0.8))
+        holes.append(Ring([(x, y), (x, y + s), (x + s, y + s), (x + s, y)], [O] * 4))
+    return w, h, holes
+
+
+@given(rooms(), st.integers(0, 1000))
+@settings(max_examples=25, deadline=None)
+def test_every_path_keeps_the_radius_from_every_obstacle(room, seed):
+    w, h, holes = room
+    outer = Ring([(0, 0), (w, 0), (w, h), (0, h)], [O] * 4)
+    poly = TypedPolygon(outer, tuple(holes))
+    try:
+        poly.validate()
+    except Exception:
+        return  # overlapping pillars
+    pmap = GridPolyMap(2.0).merge(poly).map
+    planner = Planner(pmap, NavGraph.build(pmap, R))
+    rng = np.random.default_rng(seed)
+    s, e = obstacles(pmap)
+    for _ in range(3):
+        a, b = rng.uniform((0.3, 0.3), (w - 0.3, h - 0.3), (2, 2))
+        if not (pmap.is_free(*a) and pmap.is_free(*b)):
+            continue
+        try:
+            path = planner.plan(a, b)
+        except PlanningError:
+            continue
+        inner = path.points
+        # the first and last legs may start or end closer than R (the robot is there)
+        if len(inner) > 3:
+            assert path_clearance(inner[1:-1], s, e) >= R - 1e-6
+        assert pmap.is_free_many(inner).all()
