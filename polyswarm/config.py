@@ -142,17 +142,32 @@ class SlamConfig:
 @dataclass(frozen=True)
 class NavConfig:
     robot_radius_m: float = 0.2
-    clearance_margin_m: float = 0.02  # extra distance kept from obstacles when planning
+    # extra distance kept from map obstacles when planning: covers the map's wall error
+    # (about 3 cm, bench slam) and leaves the local controller (which keeps the radius
+    # plus ControlParams.safety_margin_m from scan points) room to follow the path
+    clearance_margin_m: float = 0.1
 
 
 @dataclass(frozen=True)
 class ExploreConfig:
     strategy: str = "hungarian"  # hungarian | greedy | nearest
     min_frontier_length_m: float = 0.4  # shorter frontier segments are not targets
+    max_frontier_length_m: float = 4.0  # longer ones are split, so robots can share them
     blacklist_after_failures: int = 2
-    no_progress_timeout_s: float = 30.0
+    no_progress_timeout_s: float = 20.0  # path cost to the target must shrink within this
     hysteresis: float = 0.8  # a new target must cost less than this times the current one
     target_separation_m: float = 3.0  # targets of different robots at least this far apart
+    cycle_period_s: float = 1.0  # assignment cycle (also on events: reached, failed, joined)
+    end_confirm_s: float = 3.0  # no reachable frontier for this long ends the mission
+    return_home: bool = True  # robots drive back to their start when the mission ends
+
+
+@dataclass(frozen=True)
+class RobotEntry:
+    """A robot of the swarm and its start pose in the shared map frame (x, y, theta)."""
+
+    id: str = "r1"
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -170,6 +185,7 @@ class Config:
     nav: NavConfig = field(default_factory=NavConfig)
     explore: ExploreConfig = field(default_factory=ExploreConfig)
     comms: CommsConfig = field(default_factory=CommsConfig)
+    robots: tuple[RobotEntry, ...] = ()  # [[robots]] tables: ids and start poses
 
 
 # ---------------------------------------------------------------------------------------
@@ -205,7 +221,7 @@ def _check_value(value: Any, hint: Any, where: str) -> Any:
             raise ConfigError(f"{where}: expected {len(args)} values, got {len(value)}")
         return tuple(
             _check_value(v, a, f"{where}[{i}]")
-            for i, (v, a) in enumerate(zip(args, value, strict=True))
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if origin in (types.UnionType, typing.Union):
         args = [a for a in typing.get_args(hint) if a is not type(None)]
@@ -251,7 +267,7 @@ def config_to_dict(cfg: Any) -> dict:
         if dataclasses.is_dataclass(v):
             out[f.name] = config_to_dict(v)
         elif isinstance(v, tuple):
-            out[f.name] = list(v)
+            out[f.name] = [config_to_dict(x) if dataclasses.is_dataclass(x) else x for x in v]
         else:
             out[f.name] = v
     return out
@@ -312,5 +328,11 @@ def validate(cfg: Config) -> None:
         raise ConfigError(
             f"explore.strategy must be hungarian, greedy or nearest, got {cfg.explore.strategy!r}"
         )
+    ids = [r.id for r in cfg.robots]
+    if len(set(ids)) != len(ids):
+        raise ConfigError(f"robots: ids must be unique, got {ids}")
+    for r in cfg.robots:
+        if not r.id or not all(ch.isalnum() or ch in "_-" for ch in r.id) or len(r.id) > 32:
+            raise ConfigError(f"robots: id {r.id!r} must be 1-32 letters, digits, '_' or '-'")
     if cfg.slam.refine.score_c <= 0:
         raise ConfigError("slam.refine.score_c must be positive (it avoids a division by zero)")

@@ -35,6 +35,15 @@ from polyswarm.polymap import (
 NodeId = tuple[int, int, int]  # cell i, cell j, piece index
 PORTAL_STEP_M = 0.05  # openings are checked for clearance at this spacing
 BOUNDARY = (VectorType.OBSTACLE, VectorType.FRONTIER)  # what the robot's disc must not cross
+BUFFER_SEGMENTS = 4  # quarter-circle segments of the planner's grown obstacles
+SAMPLE_SLACK_M = 0.005  # openings are sampled: keep this much extra clearance
+
+
+def grown_radius(radius: float) -> float:
+    """The planner grows obstacles by a polygon circumscribing the radius (so a path is
+    never closer than the radius); the graph prunes with the same reach plus the
+    sampling slack, so an edge it keeps is one the planner can pass."""
+    return radius / math.cos(math.pi / (4 * BUFFER_SEGMENTS))
 
 
 @dataclass(frozen=True)
@@ -88,20 +97,69 @@ class NavGraph:
         return self
 
     def _recompute(self, pmap: GridPolyMap, cells: set[CellIndex]) -> None:
-        for c in cells:
-            if c in pmap.cells:
-                self.cells[c] = _cell_graph(pmap, c, self.radius)
-            else:
-                self.cells.pop(c, None)
+        """Recompute ``cells`` and the borders they share, in one vectorised pass."""
+        live = sorted(c for c in cells if c in pmap.cells)
+        for c in cells - set(live):
+            self.cells.pop(c, None)
         pairs = set()
         for i, j in cells:
             for n in ((i + 1, j), (i, j + 1), (i - 1, j), (i, j - 1)):
                 pairs.add(((i, j), n) if (i, j) < n else (n, (i, j)))
-        for a, b in pairs:
-            if a in pmap.cells and b in pmap.cells:
-                self.borders[(a, b)] = _border_edges(pmap, a, b, self.radius)
+        live_pairs = sorted(p for p in pairs if p[0] in pmap.cells and p[1] in pmap.cells)
+        for p in pairs - set(live_pairs):
+            self.borders.pop(p, None)
+
+        # 1. every opening to check: splits inside each cell, each piece's stretch of the
+        #    cell border, and the shared intervals across each border
+        jobs = _Openings()
+        centroids = []
+        for c in live:
+            part = pmap.cells[c].partition
+            for pa, pb, a, b in part.internal_links():
+                jobs.add(("link", c, (pa, pb)), a, b)
+            for k, _, a, b in _border_segments(pmap.cells[c]):
+                jobs.add(("side", c, k), a, b)
+            centroids.extend(p.centroid for p in part.pieces)
+        for pair in live_pairs:
+            for key, a, b in _border_intervals(pmap, *pair):
+                jobs.add(("border", pair, key), a, b)
+
+        # 2. one clearance test of all their samples (and the piece centroids)
+        reach = grown_radius(self.radius) + SAMPLE_SLACK_M
+        st, en = _boundary_around(pmap, live, reach)
+        centroids = np.array(centroids, dtype=float).reshape(-1, 2)
+        pts, first, n = jobs.samples()
+        ok = clear_of(np.concatenate([centroids, pts]), st, en, reach)
+        centre_ok, sample_ok = ok[: len(centroids)], ok[len(centroids) :]
+        portals = _longest_runs(pts, sample_ok, first, n)
+
+        # 3. assemble nodes and edges
+        fresh = {c: CellGraph({}, {}, len(pmap.cells[c].partition.pieces)) for c in live}
+        k = 0
+        for c in live:
+            cg = fresh[c]
+            for piece in range(cg.all_pieces):
+                if centre_ok[k]:
+                    cg.nodes[(c[0], c[1], piece)] = centroids[k]
+                k += 1
+        for pair in live_pairs:
+            self.borders[pair] = {}
+        for (kind, where, key), portal in zip(jobs.keys, portals, strict=True):
+            if portal is None:
+                continue
+            if kind == "border":
+                self.borders[where][key] = portal
+                continue
+            cg = fresh[where]
+            # a piece whose centroid is too close may still hold a usable opening
+            if kind == "link":
+                a, b = (where[0], where[1], key[0]), (where[0], where[1], key[1])
+                cg.internal[(a, b)] = portal
+                cg.nodes.setdefault(a, portal.mid)
+                cg.nodes.setdefault(b, portal.mid)
             else:
-                self.borders.pop((a, b), None)
+                cg.nodes.setdefault((where[0], where[1], key), portal.mid)
+        self.cells.update(fresh)
 
     # -- queries ------------------------------------------------------------------------
 
@@ -118,6 +176,10 @@ class NavGraph:
         return sum(len(c.internal) for c in self.cells.values()) + sum(
             len(b) for b in self.borders.values()
         )
+
+    def has_node(self, node: NodeId) -> bool:
+        cg = self.cells.get((node[0], node[1]))
+        return cg is not None and node in cg.nodes
 
     def point(self, node: NodeId) -> np.ndarray:
         return self.cells[(node[0], node[1])].nodes[node]
@@ -145,82 +207,119 @@ class NavGraph:
 # ---------------------------------------------------------------------------------------
 
 
-def _boundary_near(pmap: GridPolyMap, c: CellIndex, reach: float):
-    i, j = c
-    s = pmap.cell_size
-    cells = [
-        (i + di, j + dj)
-        for di in range(-1 - int(reach // s), 2 + int(reach // s))
-        for dj in range(-1 - int(reach // s), 2 + int(reach // s))
-    ]
-    st, en, _ = pmap.vectors(BOUNDARY, cells)
-    return st, en
+def _cell_boundary(cell) -> tuple[np.ndarray, np.ndarray]:
+    """Obstacle and frontier vectors of one cell, cached on the (immutable) cell."""
+    cached = cell.__dict__.get("_nav_boundary")
+    if cached is None:
+        st, en, ty = cell.vectors
+        m = np.zeros(len(ty), dtype=bool)
+        for kind in BOUNDARY:
+            m |= ty == int(kind)
+        cached = (st[m], en[m])
+        cell.__dict__["_nav_boundary"] = cached
+    return cached
 
 
-def _clearance(points: np.ndarray, st: np.ndarray, en: np.ndarray) -> np.ndarray:
-    """Distance from each point to the nearest obstacle vector (inf if none)."""
+def _boundary_around(pmap: GridPolyMap, cells, reach: float):
+    """Boundary vectors of the cells and of every cell within ``reach`` of them."""
+    k = 1 + int(reach // pmap.cell_size)
+    near = {
+        (i + di, j + dj) for i, j in cells for di in range(-k, k + 1) for dj in range(-k, k + 1)
+    }
+    parts = [_cell_boundary(pmap.cells[c]) for c in near if c in pmap.cells]
+    if not parts:
+        z = np.zeros((0, 2))
+        return z, z
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def clear_of(points: np.ndarray, st: np.ndarray, en: np.ndarray, radius: float) -> np.ndarray:
+    """For each point: is it at least ``radius`` from every segment st[k]-en[k]?
+
+    Spatial hashing in numpy: each segment is registered in the bins (of side
+    ``radius``) that its bounding box grown by ``radius`` covers; a point is tested
+    exactly against the segments registered in its own bin only."""
+    ok = np.ones(len(points), dtype=bool)
     if len(st) == 0 or len(points) == 0:
-        return np.full(len(points), math.inf)
-    d = en - st
-    L2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-18)
-    rel = points[:, None, :] - st[None, :, :]
-    t = np.clip(np.einsum("pkj,kj->pk", rel, d) / L2[None, :], 0.0, 1.0)
-    q = st[None, :, :] + t[:, :, None] * d[None, :, :]
-    return np.sqrt(((points[:, None, :] - q) ** 2).sum(-1)).min(axis=1)
+        return ok
+    b = max(radius, 0.05)  # metres; bins smaller than 5 cm only add registrations
+    lo = np.floor((np.minimum(st, en) - radius) / b).astype(np.int64)
+    hi = np.floor((np.maximum(st, en) + radius) / b).astype(np.int64)
+    origin = lo.min(axis=0)
+    lo, hi = lo - origin, hi - origin
+    width = int(hi[:, 1].max()) + 1
+    nx, ny = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
+    count = nx * ny
+    seg = np.repeat(np.arange(len(st)), count)
+    local = np.arange(len(seg)) - np.repeat(np.cumsum(count) - count, count)
+    key = (lo[seg, 0] + local // ny[seg]) * width + lo[seg, 1] + local % ny[seg]
+    order = np.argsort(key, kind="stable")
+    key, seg = key[order], seg[order]
+    pb = np.floor(points / b).astype(np.int64) - origin
+    inside = (pb[:, 1] >= 0) & (pb[:, 1] < width) & (pb[:, 0] >= 0)
+    pkey = np.where(inside, pb[:, 0] * width + pb[:, 1], -1)
+    left = np.searchsorted(key, pkey, "left")
+    m = np.where(inside, np.searchsorted(key, pkey, "right") - left, 0)
+    if m.sum() == 0:
+        return ok
+    pidx = np.repeat(np.arange(len(points)), m)
+    sidx = seg[np.repeat(left, m) + np.arange(len(pidx)) - np.repeat(np.cumsum(m) - m, m)]
+    a, d = st[sidx], en[sidx] - st[sidx]
+    rel = points[pidx] - a
+    t = np.clip(
+        np.einsum("ij,ij->i", rel, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-18), 0, 1
+    )
+    gap = rel - t[:, None] * d
+    close = np.einsum("ij,ij->i", gap, gap) < radius * radius
+    ok[pidx[close]] = False
+    return ok
 
 
-def _usable_many(a: np.ndarray, b: np.ndarray, st, en, radius: float) -> list[Portal | None]:
-    """For each opening a[k]-b[k]: the longest run of it keeping ``radius`` from the
-    boundary (sampled every PORTAL_STEP_M), or None."""
-    if len(a) == 0:
-        return []
-    L = np.hypot(*(b - a).T)
-    n = np.maximum(3, np.ceil(L / PORTAL_STEP_M).astype(np.int64) + 1)
-    owner = np.repeat(np.arange(len(a)), n)
-    first = np.cumsum(n) - n
-    t = (np.arange(len(owner)) - first[owner]) / (n[owner] - 1)
-    pts = a[owner] + t[:, None] * (b - a)[owner]
-    ok = _clearance(pts, st, en) >= radius
-    out: list[Portal | None] = []
-    for k in range(len(a)):
-        seg = ok[first[k] : first[k] + n[k]]
-        if not seg.any():
-            out.append(None)
-            continue
-        # longest run of usable samples
-        edges = np.diff(np.r_[0, seg.astype(np.int8), 0])
-        starts, stops = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]
-        r = int(np.argmax(stops - starts))
-        p = pts[first[k] : first[k] + n[k]]
-        out.append(Portal(p[starts[r]].copy(), p[stops[r] - 1].copy()))
+class _Openings:
+    """Openings to test, each sampled every PORTAL_STEP_M."""
+
+    def __init__(self) -> None:
+        self.keys: list = []
+        self.a: list = []
+        self.b: list = []
+
+    def add(self, key, a, b) -> None:
+        self.keys.append(key)
+        self.a.append(a)
+        self.b.append(b)
+
+    def samples(self):
+        a = np.array(self.a, dtype=float).reshape(-1, 2)
+        b = np.array(self.b, dtype=float).reshape(-1, 2)
+        L = np.hypot(*(b - a).T)
+        n = np.maximum(3, np.ceil(L / PORTAL_STEP_M).astype(np.int64) + 1)
+        owner = np.repeat(np.arange(len(a)), n)
+        first = np.cumsum(n) - n
+        t = (np.arange(len(owner)) - first[owner]) / (n[owner] - 1)
+        return a[owner] + t[:, None] * (b - a)[owner], first, n
+
+
+def _longest_runs(pts, ok, first, n) -> list[Portal | None]:
+    """For each opening: its longest run of usable samples, or None."""
+    out: list[Portal | None] = [None] * len(first)
+    if len(pts) == 0:
+        return out
+    owner = np.repeat(np.arange(len(first)), n)
+    # a run starts at a usable sample whose predecessor is unusable or another opening's
+    prev_ok = np.r_[False, ok[:-1]] & np.r_[False, owner[1:] == owner[:-1]]
+    next_ok = np.r_[ok[1:], False] & np.r_[owner[1:] == owner[:-1], False]
+    starts = np.nonzero(ok & ~prev_ok)[0]
+    stops = np.nonzero(ok & ~next_ok)[0]  # inclusive, paired with starts in order
+    keep = stops > starts  # a single usable sample is a pinch point, not an opening
+    starts, stops = starts[keep], stops[keep]
+    if len(starts) == 0:
+        return out
+    length = stops - starts
+    order = np.lexsort((-length, owner[starts]))  # per opening, the longest run first
+    first_of = np.r_[True, np.diff(owner[starts][order]) != 0]
+    for k in order[first_of].tolist():
+        out[int(owner[starts[k]])] = Portal(pts[starts[k]].copy(), pts[stops[k]].copy())
     return out
-
-
-def _cell_graph(pmap: GridPolyMap, c: CellIndex, radius: float) -> CellGraph:
-    cell = pmap.cells[c]
-    part = cell.partition
-    st, en = _boundary_near(pmap, c, radius)
-    links = part.internal_links()
-    border = _border_segments(cell)
-    a = np.array([np.r_[s_] for _, _, s_, _ in links] + [p for _, _, p, _ in border]).reshape(-1, 2)
-    b = np.array([np.r_[e_] for _, _, _, e_ in links] + [q for _, _, _, q in border]).reshape(-1, 2)
-    portals = _usable_many(a, b, st, en, radius)
-    internal: dict[tuple[NodeId, NodeId], Portal] = {}
-    nodes: dict[NodeId, np.ndarray] = {}
-    centroids = np.array([p.centroid for p in part.pieces]).reshape(-1, 2)
-    clear = _clearance(centroids, st, en)
-    for k in np.nonzero(clear >= radius)[0]:
-        nodes[(c[0], c[1], int(k))] = centroids[k]
-    # pieces whose centroid is too close may still hold a usable opening
-    for (pa, pb, _, _), p in zip(links, portals[: len(links)], strict=True):
-        if p is not None:
-            internal[((c[0], c[1], pa), (c[0], c[1], pb))] = p
-            nodes.setdefault((c[0], c[1], pa), p.mid)
-            nodes.setdefault((c[0], c[1], pb), p.mid)
-    for (k, _, _, _), p in zip(border, portals[len(links) :], strict=True):
-        if p is not None:
-            nodes.setdefault((c[0], c[1], k), p.mid)
-    return CellGraph(nodes, internal, len(part.pieces))
 
 
 SECTOR = int(VectorType.SECTOR)
@@ -233,35 +332,33 @@ def _border_segments(cell) -> list:
     cached = cell.__dict__.get("_border_segments")
     if cached is not None:
         return cached
+    owner, xy, nxt, types, links = cell.partition.vectors
+    cand = (types == SECTOR) & (links < 0)
     x0, y0, x1, y1 = cell.bounds
     out = []
-    for k, piece in enumerate(cell.partition.pieces):
-        xy = piece.xy
-        nxt = np.roll(xy, -1, axis=0)
-        cand = (piece.types == SECTOR) & (piece.links < 0)
-        for side, (axis, val) in enumerate(((0, x0), (0, x1), (1, y0), (1, y1))):
-            on = (
-                cand
-                & (np.abs(xy[:, axis] - val) <= BORDER_TOL_M)
-                & (np.abs(nxt[:, axis] - val) <= BORDER_TOL_M)
-            )
-            for i in np.nonzero(on)[0]:
-                out.append((k, side, xy[i], nxt[i]))
+    for side, (axis, val) in enumerate(((0, x0), (0, x1), (1, y0), (1, y1))):
+        on = (
+            cand
+            & (np.abs(xy[:, axis] - val) <= BORDER_TOL_M)
+            & (np.abs(nxt[:, axis] - val) <= BORDER_TOL_M)
+        )
+        out.extend((int(owner[i]), side, xy[i], nxt[i]) for i in np.nonzero(on)[0])
     cell.__dict__["_border_segments"] = out
     return out
 
 
-def _border_edges(pmap: GridPolyMap, a: CellIndex, b: CellIndex, radius: float):
-    """Edges between pieces of two neighbouring cells (a < b) across their border."""
+def _border_intervals(pmap: GridPolyMap, a: CellIndex, b: CellIndex):
+    """(edge key, start, end) of the shared openings of two neighbouring cells (a < b).
+
+    The border line is known from the cell indices; the pieces' border stretches are
+    matched by interval overlap along it."""
     if a[0] != b[0]:  # b is east of a: the border is the line x = b.i * size
         side_a, side_b, axis = 1, 0, 1
     else:  # b is north of a
         side_a, side_b, axis = 3, 2, 0
     sa = [s for s in _border_segments(pmap.cells[a]) if s[1] == side_a]
     sb = [s for s in _border_segments(pmap.cells[b]) if s[1] == side_b]
-    if not sa or not sb:
-        return {}
-    keys, p0s, p1s = [], [], []
+    out = []
     for ka, _, pa, qa in sa:
         lo_a, hi_a = sorted((pa[axis], qa[axis]))
         for kb, _, pb, qb in sb:
@@ -271,17 +368,8 @@ def _border_edges(pmap: GridPolyMap, a: CellIndex, b: CellIndex, radius: float):
             p0, p1 = np.empty(2), np.empty(2)
             p0[axis], p1[axis] = lo, hi
             p0[1 - axis] = p1[1 - axis] = pa[1 - axis]
-            keys.append(((a[0], a[1], ka), (b[0], b[1], kb)))
-            p0s.append(p0)
-            p1s.append(p1)
-    if not keys:
-        return {}
-    st, en = _boundary_near(pmap, a, radius)
-    st2, en2 = _boundary_near(pmap, b, radius)
-    portals = _usable_many(
-        np.array(p0s), np.array(p1s), np.concatenate([st, st2]), np.concatenate([en, en2]), radius
-    )
-    return {k: p for k, p in zip(keys, portals, strict=True) if p is not None}
+            out.append((((a[0], a[1], ka), (b[0], b[1], kb)), p0, p1))
+    return out
 
 
 def node_of(pmap: GridPolyMap, x: float, y: float) -> NodeId | None:

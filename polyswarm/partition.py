@@ -17,6 +17,7 @@ border line, which is known exactly from the cell index (the hyperplane of Algor
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import mapbox_earcut
 import numpy as np
@@ -70,14 +71,26 @@ class CellPartition:
                 best, best_d = k, d
         return best if best_d <= PRECISION_M else None
 
+    @cached_property
+    def vectors(self) -> tuple[np.ndarray, ...]:
+        """All pieces' vectors at once: (piece, start, end, type, link) arrays."""
+        if not self.pieces:
+            z = np.zeros((0, 2))
+            return np.zeros(0, np.int64), z, z, np.zeros(0, np.uint8), np.zeros(0, np.int64)
+        sizes = np.array([len(p.xy) for p in self.pieces])
+        owner = np.repeat(np.arange(len(self.pieces)), sizes)
+        xy = np.concatenate([p.xy for p in self.pieces])
+        first = np.repeat(np.cumsum(sizes) - sizes, sizes)
+        nxt = xy[first + (np.arange(len(xy)) - first + 1) % sizes[owner]]
+        types = np.concatenate([p.types for p in self.pieces])
+        links = np.concatenate([p.links for p in self.pieces])
+        return owner, xy, nxt, types, links
+
     def internal_links(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
         """Each internal split once: (piece a, piece b, start, end) with a < b."""
-        out = []
-        for a, p in enumerate(self.pieces):
-            nxt = np.roll(p.xy, -1, axis=0)
-            for i in np.nonzero(p.links > a)[0]:
-                out.append((a, int(p.links[i]), p.xy[i], nxt[i]))
-        return out
+        owner, xy, nxt, _, links = self.vectors
+        idx = np.nonzero(links > owner)[0]
+        return [(int(owner[i]), int(links[i]), xy[i], nxt[i]) for i in idx]
 
 
 def _outside_distance(xy: np.ndarray, x: float, y: float) -> float:
@@ -129,10 +142,13 @@ def _tri_area(xy: np.ndarray, tri: np.ndarray) -> np.ndarray:
 def _partition_polygon(rings, offset: int) -> list[Piece]:
     xy = np.concatenate([r.xy for r in rings])
     types = np.concatenate([r.types for r in rings])
-    sizes = [len(r) for r in rings]
+    sizes = np.array([len(r) for r in rings])
     ends = np.cumsum(sizes)
-    starts = ends - np.array(sizes)
-    area = sum(r.signed_area for r in rings)
+    first = np.repeat(ends - sizes, sizes)
+    idx = np.arange(len(xy))
+    succ = first + (idx - first + 1) % np.repeat(sizes, sizes)  # next vertex on its ring
+    nx = xy[succ]
+    area = 0.5 * float((xy[:, 0] * nx[:, 1] - xy[:, 1] * nx[:, 0]).sum())
     tri = _triangulate(xy, ends, area)
     if len(tri) == 0:
         return []
@@ -141,15 +157,17 @@ def _partition_polygon(rings, offset: int) -> list[Piece]:
     tri[flip] = tri[flip][:, ::-1]
     q = np.rint(xy * UNITS_PER_M).astype(np.int64)  # exact integer geometry for convexity
     # a hole may touch the shell: vertices at one grid point share one index
-    _, first, inverse = np.unique(q, axis=0, return_index=True, return_inverse=True)
-    canon = first[inverse.ravel()]
+    key = (q[:, 0] - q[:, 0].min()) * (int(q[:, 1].max() - q[:, 1].min()) + 1) + (
+        q[:, 1] - q[:, 1].min()
+    )
+    _, firsts, inverse = np.unique(key, return_index=True, return_inverse=True)
+    canon = firsts[inverse.ravel()]
     tri = canon[tri]
 
     # type of each boundary vector, keyed by its (start, end) vertex indices
-    boundary: dict[tuple[int, int], int] = {}
-    for s, n in zip(starts, sizes, strict=True):
-        for k in range(n):
-            boundary[(int(canon[s + k]), int(canon[s + (k + 1) % n]))] = int(types[s + k])
+    boundary: dict[tuple[int, int], int] = dict(
+        zip(zip(canon.tolist(), canon[succ].tolist(), strict=True), types.tolist(), strict=True)
+    )
 
     # each piece is a cycle stored as next/prev maps over vertex indices
     nxt: list[dict[int, int]] = []
@@ -168,12 +186,13 @@ def _partition_polygon(rings, offset: int) -> list[Piece]:
             p = parent[p]
         return p
 
+    qx, qy = q[:, 0].tolist(), q[:, 1].tolist()  # exact Python integers
+
     def left_turn(a: int, b: int, c: int) -> bool:
-        u, v = q[b] - q[a], q[c] - q[b]
-        return int(u[0]) * int(v[1]) - int(u[1]) * int(v[0]) >= 0
+        return (qx[b] - qx[a]) * (qy[c] - qy[b]) - (qy[b] - qy[a]) * (qx[c] - qx[b]) >= 0
 
     diagonals = [(u, v) for (u, v) in owner if u < v and (v, u) in owner and (u, v) not in boundary]
-    diagonals.sort(key=lambda e: -float(np.hypot(*(xy[e[1]] - xy[e[0]]))))
+    diagonals.sort(key=lambda e: -((qx[e[1]] - qx[e[0]]) ** 2 + (qy[e[1]] - qy[e[0]]) ** 2))
     for u, v in diagonals:
         P, Q = find(owner[(u, v)]), find(owner[(v, u)])
         if P == Q:

@@ -30,10 +30,19 @@ import shapely
 import shapely.ops
 
 from polyswarm.errors import PlanningError
-from polyswarm.navgraph import BOUNDARY, NavGraph, NodeId, node_of, piece_polygon
+from polyswarm.navgraph import (
+    BOUNDARY,
+    BUFFER_SEGMENTS,
+    NavGraph,
+    NodeId,
+    grown_radius,
+    node_of,
+    piece_polygon,
+)
 from polyswarm.polymap import GridPolyMap
 
-BUFFER_SEGMENTS = 4  # quarter-circle segments of the grown obstacles
+ENTRY_INSET_M = 2e-3  # an entry point lies this far inside the free space
+JOIN_M = 1.0  # start or goal this close to the robot's free space joins it straight
 MAX_SLEEVE_RETRIES = 4  # openings blocked by the exact check before giving up
 
 
@@ -64,16 +73,21 @@ class Planner:
         g_node = node_of(self.map, *goal)
         if g_node is None:
             raise PlanningError(f"goal {tuple(goal)} is in unexplored space (or in an obstacle)")
+        # a start or goal in a piece too tight for the robot joins the graph nearby
+        sources, targets = self._entries(s_node, start), self._entries(g_node, goal)
+        if not sources or not targets:
+            where = "start" if not sources else "goal"
+            raise PlanningError(f"no room for radius {self.radius} m near the {where}")
         blocked: set[tuple[NodeId, NodeId]] = set()
         expansions = 0
         for _ in range(MAX_SLEEVE_RETRIES + 1):
-            nodes, n_exp = self._astar(s_node, g_node, start, goal, blocked)
+            nodes, n_exp = self._astar(sources, targets, goal, blocked)
             expansions += n_exp
             if nodes is None:
                 raise PlanningError(
                     f"no path from {tuple(start)} to {tuple(goal)} for radius {self.radius} m"
                 )
-            pts, bad = self._taut(nodes, start, goal)
+            pts, bad = self._taut(nodes, start, goal, (s_node, g_node))
             if pts is not None:
                 return Path(pts, tuple(nodes), expansions)
             blocked |= bad
@@ -81,25 +95,41 @@ class Planner:
             f"no path with {self.radius} m clearance from {tuple(start)} to {tuple(goal)}"
         )
 
+    def _entries(self, node: NodeId, p: np.ndarray) -> dict[NodeId, tuple[float, np.ndarray]]:
+        """Graph nodes a point joins: its own piece's, else those within ``JOIN_M``."""
+        if self.graph.has_node(node):
+            return {node: (0.0, p)}
+        out = {}
+        for c in self.map.cells_within(p[0], p[1], JOIN_M):
+            cg = self.graph.cells.get(c)
+            if cg is None:
+                continue
+            for n, q in cg.nodes.items():
+                d = float(np.hypot(*(q - p)))
+                if d <= JOIN_M:
+                    out[n] = (d, q)
+        return out
+
     # -- 1. A* over the graph -------------------------------------------------------------
 
-    def _astar(self, s: NodeId, g: NodeId, start, goal, blocked):
-        if s == g:
-            return [s], 0
+    def _astar(self, sources: dict, targets: dict, goal, blocked):
         tie = itertools.count()
-        best = {s: 0.0}
-        pos = {s: start}
+        best: dict[NodeId, float] = {}
+        pos: dict[NodeId, np.ndarray] = {}
         parent: dict[NodeId, NodeId] = {}
-        heap = [(float(np.hypot(*(goal - start))), next(tie), s)]
+        heap = []
+        for n, (d, q) in sources.items():
+            best[n], pos[n] = d, q
+            heapq.heappush(heap, (d + float(np.hypot(*(goal - q))), next(tie), n))
         closed = set()
         exp = 0
         while heap:
             _, _, n = heapq.heappop(heap)
             if n in closed:
                 continue
-            if n == g:
+            if n in targets:
                 out = [n]
-                while out[-1] != s:
+                while out[-1] in parent:
                     out.append(parent[out[-1]])
                 return out[::-1], exp
             closed.add(n)
@@ -111,20 +141,21 @@ class Planner:
                 # enter m at the point of its opening closest to the straight line on
                 cross = _closest_on_segment(portal.a, portal.b, here, goal)
                 cost = best[n] + float(np.hypot(*(cross - here)))
-                if m == g:
+                if m in targets:
                     cost += float(np.hypot(*(goal - cross)))
                 if cost < best.get(m, math.inf):
                     best[m] = cost
                     pos[m] = cross
                     parent[m] = n
-                    h = 0.0 if m == g else float(np.hypot(*(goal - cross)))
+                    h = 0.0 if m in targets else float(np.hypot(*(goal - cross)))
                     heapq.heappush(heap, (cost + h, next(tie), m))
         return None, exp
 
     # -- 2./3. the taut path in the sleeve ------------------------------------------------
 
-    def _taut(self, nodes, start, goal):
-        polys = [shapely.Polygon(piece_polygon(self.map, n)) for n in nodes]
+    def _taut(self, nodes, start, goal, ends=()):
+        pieces = list(dict.fromkeys([*nodes, *ends]))  # the start's and goal's pieces too
+        polys = [shapely.Polygon(piece_polygon(self.map, n)) for n in pieces]
         sleeve = shapely.union_all(polys, grid_size=1e-6)
         x0, y0, x1, y1 = sleeve.bounds
         r = self.radius
@@ -141,7 +172,7 @@ class Planner:
             )
         ]
         st, en, _ = self.map.vectors(BOUNDARY, cells)
-        r_out = r / math.cos(math.pi / (4 * BUFFER_SEGMENTS))  # circumscribed: never closer
+        r_out = grown_radius(r)  # circumscribed: never closer than r
         free = sleeve
         if len(st):
             grown = shapely.buffer(
@@ -150,8 +181,10 @@ class Planner:
                 quad_segs=BUFFER_SEGMENTS,
             )
             free = shapely.difference(sleeve, grown, grid_size=1e-6)
-        part_s, s_eff = _component_and_entry(free, start)
+        # the goal's part of the free space first: a robot standing too close to a
+        # wall (in a doorway) joins that part if it can, not merely the nearest part
         part_g, g_eff = _component_and_entry(free, goal)
+        part_s, s_eff = _component_and_entry(free, start, prefer=part_g)
         if part_s is None or part_g is None or not part_s.equals(part_g):
             # the sleeve is cut by obstacles somewhere: block the narrowest opening
             return None, _narrowest_openings(self.graph, nodes)
@@ -192,8 +225,9 @@ def _narrowest_openings(graph: NavGraph, nodes) -> set:
     return {edge} if edge else set()
 
 
-def _component_and_entry(free, p):
-    """The part of the free space holding p (or nearest to it) and a point in it."""
+def _component_and_entry(free, p, prefer=None):
+    """The part of the free space holding p (or nearest to it; ``prefer`` if it is
+    within ``JOIN_M``) and a point in it."""
     parts = [g for g in shapely.get_parts(free) if not g.is_empty and g.area > 1e-9]
     if not parts:
         return None, None
@@ -203,13 +237,15 @@ def _component_and_entry(free, p):
             return g, np.asarray(p, dtype=float)
     d = [g.distance(pt) for g in parts]
     g = parts[int(np.argmin(d))]
-    if min(d) > 1.0:  # farther than a metre from any room for the robot
+    if prefer is not None and prefer.distance(pt) <= JOIN_M:
+        g = prefer
+    elif min(d) > JOIN_M:  # farther than this from any room for the robot
         return None, None
-    q = np.asarray(shapely.ops.nearest_points(g, pt)[0].coords[0])
-    # step a millimetre inside, so the point is strictly in the free space
-    c = np.asarray(g.representative_point().coords[0])
-    q = q + 1e-3 * (c - q) / max(np.hypot(*(c - q)), 1e-12)
-    return g, q
+    # the nearest point a few millimetres inside, so it is strictly in the free space
+    inner = g.buffer(-ENTRY_INSET_M)
+    if inner.is_empty:
+        return g, np.asarray(g.representative_point().coords[0])
+    return g, np.asarray(shapely.ops.nearest_points(inner, pt)[0].coords[0])
 
 
 def _channel(poly: shapely.Polygon, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:

@@ -72,6 +72,11 @@ class PolySlam:
         self.keyframes = 0
         self.degenerate_keyframes = 0
         self.rejected_keyframes = 0
+        self._keyframe_requested = False
+
+    def request_keyframe(self) -> None:
+        """Make the next scan a keyframe (a robot that stopped to look at something)."""
+        self._keyframe_requested = True
 
     def process(self, scan: LaserScan, odom) -> SlamStep:
         odom = np.array(odom, dtype=float)
@@ -84,7 +89,7 @@ class PolySlam:
             else compose(self._kf_pose, relative(self._kf_odom, odom))
         )
         # 2. keyframe selection
-        if not self.selector.due(odom):
+        if not (self.selector.due(odom) or self._keyframe_requested):
             self.pose = pred
             return SlamStep(pred, False)
         t = {"start": time.perf_counter()}
@@ -126,6 +131,7 @@ class PolySlam:
         self.pose = np.array([pose[0], pose[1], float(wrap(pose[2]))])
         self._kf_pose, self._kf_odom = self.pose.copy(), odom
         self.selector.mark(odom)
+        self._keyframe_requested = False
         self.keyframes += 1
         names = ["points", "icp", "polygon", "refine", "merge"]
         prev, ms = t["start"], {}

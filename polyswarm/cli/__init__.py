@@ -61,7 +61,7 @@ def setup_logging(level: int) -> None:
 
 
 # command modules register themselves on the apps above
-from polyswarm.cli import bench_cmds, map_cmds, sim_cmds, slam_cmds  # noqa: E402,F401
+from polyswarm.cli import bench_cmds, map_cmds, sim_cmds, slam_cmds, swarm_cmds  # noqa: E402,F401
 
 
 def main(argv: list[str] | None = None) -> None:

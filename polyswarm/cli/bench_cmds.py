@@ -154,3 +154,67 @@ def bench_slam(
     )
     rows.append(("real-time factor (worst world)", f"{res['realtime_factor_min']:.1f} x"))
     _emit(res, False, "PolySLAM", rows)
+
+
+@bench_app.command("nav")
+def bench_nav(
+    as_json: bool = JSON_OPT,
+    pairs: int = typer.Option(50, min=1, help="Random start/goal pairs per map."),
+    seed: int = typer.Option(0, help="Seed of the start/goal draw and the PolySLAM run."),
+) -> None:
+    """Navigation graph and planner against 8-connected A* on the inflated 5 cm grid."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import nav as navbench
+
+    with Console(stderr=True).status("navigation") as status:
+        res = navbench.run(pairs, seed, lambda what: status.update(f"navigation: {what}"))
+    if as_json:
+        typer.echo(json.dumps(res, indent=2, default=float))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"Navigation, planning radius {res['planning_radius_m']:.2f} m")
+    for col in (
+        "map",
+        "nodes",
+        "edges",
+        "grid cells",
+        "pairs",
+        "length / grid",
+        "plan ms",
+        "grid A* ms",
+        "speed-up",
+        "min clearance",
+    ):
+        t.add_column(col, justify="right")
+    for name, m in res["maps"].items():
+        t.add_row(
+            name,
+            str(m["nodes"]),
+            str(m["edges"]),
+            str(m["inflated_grid_free_cells"]),
+            f"{m['pairs']} ({m['planner_failures']} failed)",
+            f"{m['path_length_ratio_median']:.3f}",
+            f"{m['planning_ms_median']:.1f}",
+            f"{m['grid_astar_ms_median']:.0f}",
+            f"{m['planning_speedup_median']:.0f} x",
+            f"{m['min_clearance_to_walls_m']:.3f} m",
+        )
+    Console().print(t)
+    _emit(
+        res,
+        False,
+        "targets",
+        [
+            ("grid free cells / nodes (worst map)", f"{res['node_ratio']:.0f}"),
+            ("path length / grid path (median)", f"{res['path_length_ratio_median']:.3f}"),
+            ("planning speed-up (median)", f"{res['planning_speedup_median']:.0f} x"),
+            (
+                "graph update p50 / p95",
+                f"{res['update_p50_ms']:.1f} / {res['update_p95_ms']:.1f} ms",
+            ),
+            ("paths closer than r to a wall", str(res["clearance_violations"])),
+        ],
+    )

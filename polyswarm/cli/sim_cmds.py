@@ -1,4 +1,4 @@
-"""``polyswarm sim``: run the simulator to look at it (the --serve bridge comes later)."""
+"""``polyswarm sim``: look at the simulator, or serve it on Zenoh (``--serve``)."""
 
 from __future__ import annotations
 
@@ -23,8 +23,17 @@ def sim_cmd(
     gui: bool = typer.Option(False, "--gui", help="Open the pybullet GUI (needs a display)."),
     out: Path | None = typer.Option(None, help="Write a PNG of the world and trajectories here."),
     config: Path | None = typer.Option(None, help="TOML config (the [sim] section is used)."),
+    serve: bool = typer.Option(
+        False, "--serve", help="Serve on Zenoh: publish scans and odometry, obey cmd_vel."
+    ),
+    speed: float | None = typer.Option(
+        None, help="--serve: simulated seconds per wall second (0: as fast as agents allow)."
+    ),
+    endpoint: str | None = typer.Option(None, help="--serve: Zenoh router endpoint."),
+    zenoh_config: Path | None = typer.Option(None, help="--serve: Zenoh JSON5 config file."),
 ) -> None:
-    """Drive robots with a reactive wander controller and report what happened."""
+    """Drive robots with a reactive wander controller and report what happened; with
+    --serve, run the simulation for robot agents over Zenoh (robots from [[robots]])."""
     import time
 
     import numpy as np
@@ -38,6 +47,9 @@ def sim_cmd(
 
     cfg = with_overrides(load_config(config), {"sim": {"seed": seed}})
     w = load_world(world, seed=seed)
+    if serve:
+        _serve(cfg, w, robots, speed, endpoint, zenoh_config, gui)
+        return
     trails: list[list] = [[] for _ in range(robots)]
     t0 = time.perf_counter()
     with Simulation(w, cfg.sim, robots, gui=gui) as sim:
@@ -84,3 +96,28 @@ def plot_world(world, trajectories, path: Path) -> None:
     ax.set_title(world.name)
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _serve(cfg, world, robots: int, speed, endpoint, zenoh_config, gui: bool) -> None:
+    import dataclasses
+
+    from agents.session import SessionSpec, stop_on_signals
+    from polyswarm.config import RobotEntry
+    from polyswarm.runners.simserve import serve
+    from sim import spread_start_poses
+
+    if not cfg.robots:  # no [[robots]] in the config: r1..rN spread over the start area
+        starts = spread_start_poses(world, robots, cfg.sim.robot.radius_m)
+        cfg = dataclasses.replace(
+            cfg, robots=tuple(RobotEntry(f"r{k + 1}", tuple(p)) for k, p in enumerate(starts))
+        )
+    spec = SessionSpec.client(
+        endpoint or cfg.comms.endpoint, str(zenoh_config or cfg.comms.zenoh_config or "")
+    )
+    sim = serve(cfg, world, spec, stop_on_signals(), speed=speed, gui=gui)
+    typer.echo(
+        f"simulated {sim.time:.1f} s; wall contacts "
+        f"{sum(r.wall_collisions for r in sim.robots)}, robot contacts "
+        f"{sum(r.robot_collisions for r in sim.robots)}",
+        err=True,
+    )

@@ -1,0 +1,454 @@
+"""The coordinator: merges the robots' maps, keeps frontier targets, assigns them.
+
+``Coordinator`` is the logic and knows nothing of Zenoh; ``run_coordinator`` wires it
+to a session (in router mode for the loopback default, so nothing else is installed).
+
+Each cycle (``Coordinator.cycle``; every ``explore.cycle_period_s`` and on events:
+a robot reached or failed its target, joined or left):
+  1. frontier targets of the merged map (reachable goal points, blacklist applied);
+  2. path costs from every robot over the merged map's navigation graph;
+  3. assignment by strategy (hungarian / greedy / nearest) with hysteresis;
+  4. failures: unreachable, stuck, or no progress for a timeout count against a
+     target; after ``blacklist_after_failures`` it is blacklisted. A target reached
+     whose frontier is still there is blacklisted at once (it cannot be resolved);
+  5. mission end: no reachable target for ``end_confirm_s`` -> robots return to their
+     start poses -> done.
+Robot map deltas are merged as they arrive (a gap fetches that robot's full map).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from polyswarm.config import Config
+from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
+from polyswarm.explore import Reach, Strategy, Target, assign, frontier_targets
+from polyswarm.navgraph import NavGraph
+from polyswarm.polymap import GridPolyMap, MapDelta
+from protocols.keys import SwarmKeys
+from protocols.mapcodec import decode_delta, decode_map, encode_delta, encode_map
+from protocols.messages import (
+    Assignment,
+    AssignmentKind,
+    CoordinatorStatus,
+    MapChunk,
+    MapKind,
+    MissionState,
+    Pose,
+    RobotState,
+    RobotStatus,
+)
+
+log = logging.getLogger(__name__)
+
+MATCH_M = 1.0  # a target within this of last cycle's keeps its id
+RESEND_S = 5.0  # assignments are repeated this often (a lost message heals)
+PROGRESS_M = 0.5  # progress towards a target: its path cost shrank by this much
+EXCLUDE_S = 30.0  # a robot that failed a target is not sent there again for this long
+REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
+
+
+@dataclass
+class RobotInfo:
+    id: str
+    start: np.ndarray
+    alive: bool = False
+    pose: np.ndarray | None = None
+    map: GridPolyMap | None = None
+    status: RobotStatus | None = None
+    assignment: Assignment | None = None
+    sent_t: float = -math.inf
+    best_cost: float = math.inf
+    progress_t: float = 0.0
+    excluded: dict[int, float] = field(default_factory=dict)  # target id -> until
+    reached_t: float | None = None  # when the robot reported its target reached
+
+
+@dataclass
+class Outgoing:
+    assignments: dict[str, Assignment] = field(default_factory=dict)
+    merged_delta: MapDelta | None = None
+    status: CoordinatorStatus | None = None
+
+
+class Coordinator:
+    def __init__(self, cfg: Config, robots: dict[str, tuple[float, float, float]]) -> None:
+        self.cfg = cfg
+        self.strategy = Strategy(cfg.explore.strategy)
+        self.radius = cfg.nav.robot_radius_m + cfg.nav.clearance_margin_m
+        self.robots = {rid: RobotInfo(rid, np.array(p, dtype=float)) for rid, p in robots.items()}
+        self.merged = GridPolyMap(cfg.map.cell_size_m)
+        self.graph = NavGraph(self.radius, cfg.map.cell_size_m)
+        self.targets: dict[int, Target] = {}
+        self._next_id = 0
+        self.failures: dict[int, int] = {}
+        self.blacklist: list[np.ndarray] = []
+        self.state = MissionState.STARTING
+        self._no_target_since: float | None = None
+        self._last_cycle = -math.inf
+        self._wake = True
+        self._pending_ms = 0.0  # merge time since the last cycle (counts into the cycle)
+        self.cycle_ms: list[float] = []
+        self.now = 0.0
+        self.bytes_sent = 0
+
+    # -- inputs -------------------------------------------------------------------------------
+
+    def robot(self, rid: str) -> RobotInfo:
+        info = self.robots.get(rid)
+        if info is None:  # a robot not in the config joins at the origin of the map frame
+            log.warning("robot %s is not in the config: its start pose is unknown", rid)
+            info = self.robots[rid] = RobotInfo(rid, np.zeros(3))
+        return info
+
+    def on_alive(self, rid: str, alive: bool) -> None:
+        info = self.robot(rid)
+        if info.alive != alive:
+            log.info("robot %s %s", rid, "joined" if alive else "left")
+            info.alive = alive
+            if not alive:
+                info.assignment = None
+            self._wake = True
+
+    def on_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
+        self.now = max(self.now, stamp_s)
+        self.robot(rid).pose = np.array([pose.x, pose.y, pose.theta])
+
+    def on_status(self, rid: str, stamp_s: float, status: RobotStatus) -> None:
+        self.now = max(self.now, stamp_s)
+        info = self.robot(rid)
+        old = info.status
+        info.status = status
+        a = info.assignment
+        if a is None or status.target != a.target:
+            return
+        if old is not None and old.state == status.state and old.target == status.target:
+            return
+        if status.state in (RobotState.UNREACHABLE, RobotState.STUCK):
+            self._failed(info, a.target, str(status.state))
+        elif status.state == RobotState.REACHED and a.kind == AssignmentKind.EXPLORE:
+            # judged at the next cycles: a frontier still open after the robot stood
+            # there and looked at it counts as a failure of that target
+            info.reached_t = self.now
+        self._wake = True
+
+    def on_robot_delta(self, rid: str, stamp_s: float, delta: MapDelta) -> MapDelta | None:
+        """Apply a robot's delta to its map and the merged map; the merged delta.
+
+        Raises DeltaGapError when the robot's delta does not apply (fetch its map)."""
+        self.now = max(self.now, stamp_s)
+        info = self.robot(rid)
+        if info.map is None:
+            if delta.base_version > 0:
+                raise _gap(rid, delta)
+            info.map = GridPolyMap(delta.cell_size)
+        info.map = info.map.apply_delta(delta)
+        return self._merge(delta.cells)
+
+    def on_robot_map(self, rid: str, pmap: GridPolyMap) -> MapDelta | None:
+        """A robot's full map (resync): nothing it mapped is lost."""
+        self.robot(rid).map = pmap
+        return self._merge(list(pmap.cells.values()))
+
+    def _merge(self, cells) -> MapDelta | None:
+        t0 = time.perf_counter()
+        base = self.merged.version
+        res = self.merged.merge_cells(cells)
+        self.merged = res.map
+        if self.merged.version == base:
+            self._pending_ms += (time.perf_counter() - t0) * 1e3
+            return None
+        delta = self.merged.delta_since(base)
+        self.graph.update(self.merged, {c.index for c in delta.cells})
+        self._pending_ms += (time.perf_counter() - t0) * 1e3
+        return delta
+
+    # -- the cycle -------------------------------------------------------------------------
+
+    def due(self) -> bool:
+        return self._wake or self.now - self._last_cycle >= self.cfg.explore.cycle_period_s
+
+    def cycle(self) -> Outgoing:
+        t0 = time.perf_counter()
+        out = Outgoing()
+        self._last_cycle = self.now
+        self._wake = False
+        live = [r for r in self.robots.values() if r.alive and r.pose is not None]
+        if self.state == MissionState.STARTING and live and self.merged.cells:
+            self.state = MissionState.EXPLORING
+            log.info("exploring with %s", [r.id for r in live])
+        if self.state in (MissionState.EXPLORING, MissionState.RETURNING) and live:
+            # 1. shortest paths from every robot over the navigation graph
+            reach = Reach.from_robots(self.graph, self.merged, [r.pose[:2] for r in live])
+            # 2. frontier targets with goal points the robots can reach, and their costs
+            targets = self._update_targets(reach)
+            ids = list(targets)
+            costs = reach.costs([t.goal for t in targets.values()])
+            for k, r in enumerate(live):  # targets this robot failed recently
+                for j, tid in enumerate(ids):
+                    if r.excluded.get(tid, -math.inf) > self.now:
+                        costs[k, j] = math.inf
+            reachable = np.isfinite(costs).any(axis=0)
+            if self.state == MissionState.RETURNING and reachable.any():
+                log.info("new frontiers while returning: exploring again")
+                self.state = MissionState.EXPLORING
+            if self.state == MissionState.EXPLORING:
+                if not reachable.any():
+                    self._no_target_since = self._no_target_since or self.now
+                    if self.now - self._no_target_since >= self.cfg.explore.end_confirm_s:
+                        self._end_exploration(live)
+                else:
+                    self._no_target_since = None
+                    # 3. assignment by strategy, keeping current targets unless beaten
+                    self._assign(live, ids, targets, costs)
+                    # 4. no progress towards a target for too long counts as a failure
+                    self._watch_progress(live, ids, costs)
+            if self.state == MissionState.RETURNING and all(
+                r.status is not None and r.status.state in (RobotState.HOME, RobotState.UNREACHABLE)
+                for r in live
+                if r.assignment is not None and r.assignment.kind == AssignmentKind.HOME
+            ):
+                self.state = MissionState.DONE
+                log.info("mission done")
+        for r in self.robots.values():
+            if r.alive and r.assignment is not None and self.now - r.sent_t >= RESEND_S:
+                out.assignments[r.id] = r.assignment
+        for rid in out.assignments:
+            self.robots[rid].sent_t = self.now
+        ms = (time.perf_counter() - t0) * 1e3 + self._pending_ms
+        self._pending_ms = 0.0
+        self.cycle_ms.append(ms)
+        out.status = CoordinatorStatus(
+            self.state,
+            tuple(sorted(r.id for r in self.robots.values() if r.alive)),
+            len(self.targets),
+            self.merged.version,
+            self.merged.explored_area(),
+            ms,
+            self.bytes_sent,
+        )
+        return out
+
+    def _update_targets(self, reach: Reach) -> dict[int, Target]:
+        e = self.cfg.explore
+        found = frontier_targets(
+            self.merged,
+            self.graph,
+            e.min_frontier_length_m,
+            e.max_frontier_length_m,
+            0.0,
+            self.blacklist,
+            reach=reach,
+        )
+        # keep ids: a target near last cycle's is the same target
+        old = list(self.targets.items())
+        new: dict[int, Target] = {}
+        for t in found:
+            tid = None
+            for oid, o in old:
+                if oid not in new and (
+                    np.hypot(*(o.goal - t.goal)) < MATCH_M
+                    or np.hypot(*(o.midpoint - t.midpoint)) < MATCH_M
+                ):
+                    tid = oid
+                    break
+            if tid is None:
+                tid = self._next_id
+                self._next_id += 1
+            new[tid] = t
+        self.targets = new
+        return new
+
+    def _assign(self, live, ids, targets, costs) -> None:
+        current = []
+        for r in live:
+            a = r.assignment
+            cur = ids.index(a.target) if a is not None and a.target in targets else None
+            current.append(cur)
+        utilities = [targets[t].utility_m for t in ids]
+        goals = np.array([targets[t].goal for t in ids]).reshape(-1, 2)
+        choice = assign(
+            self.strategy,
+            costs,
+            utilities,
+            current,
+            self.cfg.explore.hysteresis,
+            goals,
+            self.cfg.explore.target_separation_m,
+        )
+        for k, (r, j) in enumerate(zip(live, choice, strict=True)):
+            if j is None:
+                if r.assignment is not None and r.assignment.kind == AssignmentKind.EXPLORE:
+                    r.assignment = Assignment(AssignmentKind.STOP, -1)
+                    r.sent_t = -math.inf
+                continue
+            tid = ids[j]
+            t = targets[tid]
+            if r.assignment is None or r.assignment.target != tid:
+                r.best_cost, r.progress_t, r.reached_t = math.inf, self.now, None
+                r.sent_t = -math.inf
+                r.assignment = Assignment(
+                    AssignmentKind.EXPLORE,
+                    tid,
+                    (float(t.goal[0]), float(t.goal[1])),
+                    tuple((float(x), float(y)) for x, y in t.frontier.points[:64]),
+                    float(costs[k, j]),
+                    self.merged.version,
+                )
+
+    def _watch_progress(self, live, ids, costs) -> None:
+        timeout = self.cfg.explore.no_progress_timeout_s
+        for k, r in enumerate(live):
+            a = r.assignment
+            if a is None or a.kind != AssignmentKind.EXPLORE or a.target not in ids:
+                continue
+            if r.reached_t is not None and self.now - r.reached_t >= REACHED_GRACE_S:
+                r.reached_t = None
+                self._failed(r, a.target, "reached, frontier still open")
+                continue
+            c = costs[k, ids.index(a.target)]
+            if c < r.best_cost - PROGRESS_M:
+                r.best_cost, r.progress_t = c, self.now
+            elif self.now - r.progress_t > timeout:
+                self._failed(r, a.target, f"no progress for {timeout:.0f} s")
+
+    def _failed(self, r: RobotInfo, tid: int, why: str) -> None:
+        n = self.failures[tid] = self.failures.get(tid, 0) + 1
+        log.info("target %d failed by %s (%s), %d time(s)", tid, r.id, why, n)
+        r.excluded[tid] = self.now + EXCLUDE_S
+        r.best_cost, r.progress_t = math.inf, self.now
+        r.assignment = None
+        t = self.targets.get(tid)
+        if t is not None and n >= self.cfg.explore.blacklist_after_failures:
+            self._blacklist(t, f"failed {n} times")
+        self._wake = True
+
+    def _blacklist(self, t: Target, why: str) -> None:
+        log.info("blacklisting the frontier at (%.1f, %.1f): %s", *t.midpoint, why)
+        self.blacklist.append(np.array(t.goal))
+        self.blacklist.append(np.array(t.midpoint))
+        for r in self.robots.values():
+            if r.assignment is not None and self.targets.get(r.assignment.target) is t:
+                r.assignment = None
+        self._wake = True
+
+    def _end_exploration(self, live) -> None:
+        self.targets = {}
+        if not self.cfg.explore.return_home:
+            self.state = MissionState.DONE
+            log.info("no reachable frontier left: mission done")
+            return
+        self.state = MissionState.RETURNING
+        log.info("no reachable frontier left: robots return to their start")
+        for r in live:
+            r.assignment = Assignment(
+                AssignmentKind.HOME,
+                self._next_id,
+                (float(r.start[0]), float(r.start[1])),
+                (),
+                0.0,
+                self.merged.version,
+            )
+            self._next_id += 1
+            r.sent_t = -math.inf
+
+
+def _gap(rid: str, delta: MapDelta) -> MapError:
+    return DeltaGapError(f"first delta of {rid} starts at version {delta.base_version}")
+
+
+# --- the process ---------------------------------------------------------------------------------
+
+
+def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = None) -> Coordinator:
+    """Run the coordinator until ``stop`` is set (or SIGINT/SIGTERM)."""
+    from agents.session import Bus, is_alive_change, open_session, stop_on_signals
+
+    stop = stop or stop_on_signals()
+    keys = SwarmKeys(cfg.comms.swarm)
+    robots = {r.id: tuple(r.start) for r in cfg.robots}
+    coord = Coordinator(cfg, robots)
+    with open_session(session_spec) as session:
+        bus = Bus(session, "coordinator")
+        try:
+            bus.subscribe(keys.all_robots("map/delta"), MapChunk)
+            bus.subscribe(keys.all_robots("pose"), Pose)
+            bus.subscribe(keys.all_robots("status"), RobotStatus)
+            bus.serve_map(keys.merged_map, lambda: (encode_map(coord.merged), coord.merged.version))
+            bus.declare_alive(keys.alive("coordinator", "coordinator"))
+            bus.watch_alive(keys.all_alive("agent"))
+            resync: set[str] = set()
+            log.info("coordinator up: robots %s, strategy %s", list(robots), coord.strategy)
+            while not stop.is_set():
+                for item in bus.poll(timeout_s=0.05):
+                    alive = is_alive_change(item)
+                    try:
+                        if alive is not None:
+                            who = keys.alive_name(item.key)
+                            if who is not None:
+                                coord.on_alive(who[1], alive)
+                            continue
+                        rid = keys.robot_of(item.key)
+                        if rid is None:
+                            continue
+                        msg = item.msg
+                        if isinstance(msg, Pose):
+                            coord.on_pose(rid, item.stamp_s, msg)
+                        elif isinstance(msg, RobotStatus):
+                            coord.on_status(rid, item.stamp_s, msg)
+                        elif isinstance(msg, MapChunk) and item.payload is not None:
+                            try:
+                                d = coord.on_robot_delta(
+                                    rid, item.stamp_s, decode_delta(item.payload)
+                                )
+                                _publish_delta(bus, keys, coord, d)
+                            except MapError as e:
+                                log.info("resync of %s: %s", rid, e)
+                                resync.add(rid)
+                    except DecodeError as e:
+                        log.warning("rejected %s: %s", item.key, e)
+                    except PolyswarmError as e:
+                        log.warning("%s: %s", item.key, e)
+                for rid in list(resync):
+                    got = bus.fetch_map(keys.robot(rid).map, timeout_s=2.0)
+                    if got is None:
+                        continue
+                    try:
+                        _publish_delta(
+                            bus, keys, coord, coord.on_robot_map(rid, decode_map(got[0]))
+                        )
+                        resync.discard(rid)
+                    except PolyswarmError as e:
+                        log.warning("map of %s refused: %s", rid, e)
+                if coord.due():
+                    out = coord.cycle()
+                    for rid, a in out.assignments.items():
+                        coord.bytes_sent += bus.publish(
+                            keys.assignment(rid), a, coord.now, reliable=True
+                        )
+                    if out.status is not None:
+                        coord.bytes_sent += bus.publish(
+                            keys.coordinator_status, out.status, coord.now, reliable=True
+                        )
+        finally:
+            bus.close()
+    return coord
+
+
+def _publish_delta(bus, keys: SwarmKeys, coord: Coordinator, delta: MapDelta | None) -> None:
+    if delta is None:
+        return
+    coord.bytes_sent += bus.publish_map(
+        keys.merged_delta,
+        MapKind.DELTA,
+        encode_delta(delta),
+        delta.base_version,
+        delta.version,
+        coord.now,
+    )

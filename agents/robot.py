@@ -1,0 +1,505 @@
+"""The robot agent: PolySLAM, navigation and local control for one robot.
+
+``RobotAgent`` is the robot's brain and knows nothing of Zenoh: it takes scans,
+odometry, assignments and merged-map updates, and returns what to send. ``run_agent``
+wires it to a Zenoh session. The same program runs on a real robot; only the source
+of scans and odometry and the sink of velocity commands change.
+
+Per scan (``RobotAgent.on_scan``), in order:
+  1. odometry at the scan time;
+  2. PolySLAM (pre-align, ICP, keyframe polygon, refine, merge): pose and map delta;
+  3. navigation: (re)plan to the assigned goal on the merged map (own map without one);
+  4. local control: dynamic window around the path, avoiding what the scan sees;
+  5. state: reached / unreachable / stuck for the coordinator.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from polyswarm.config import Config
+from polyswarm.control import ControlParams, Follow, PathFollower
+from polyswarm.errors import DecodeError, DeltaGapError, MapError, PlanningError, PolyswarmError
+from polyswarm.navgraph import NavGraph, clear_of
+from polyswarm.planner import Planner
+from polyswarm.polymap import GridPolyMap, MapDelta, VectorType
+from polyswarm.scan import LaserScan, scan_to_points
+from polyswarm.se2 import transform_points
+from polyswarm.slam import PolySlam
+from protocols.keys import SwarmKeys, check_name
+from protocols.mapcodec import decode_delta, decode_map, encode_delta, encode_map
+from protocols.messages import (
+    Assignment,
+    AssignmentKind,
+    CmdVel,
+    MapChunk,
+    MapKind,
+    Odometry,
+    Pose,
+    RobotState,
+    RobotStatus,
+    Scan,
+)
+
+log = logging.getLogger(__name__)
+
+REPLAN_PERIOD_S = 2.0  # a path is replanned this often as the map grows (sim seconds)
+STUCK_TIMEOUT_S = 8.0  # no progress along the path for this long: stuck
+PROGRESS_M = 0.2  # ... progress means the remaining path shrank by this much
+POSE_PERIOD_S = 0.5  # pose messages to the coordinator (2 Hz)
+STATUS_PERIOD_S = 1.0
+UNEXPLAINED_M = 0.15  # a scan point this far from the map's obstacles is not a wall
+NEAR_M = 4.0  # map vectors within this of the robot are used by the local checks
+DEADLOCK_S = 2.0  # blocked this long next to another robot: the lower priority gives way
+YIELD_S = 6.0  # ... driving about a metre away for at most this long
+PEER_NEAR_M = 1.5
+PEER_FRESH_S = 2.0
+FACING_RAD = 0.3  # at the goal, turn until the frontier is this close to straight ahead
+ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
+
+
+@dataclass
+class Outbox:
+    """What one call of the agent wants sent."""
+
+    cmd: tuple[float, float] | None = None
+    pose: Pose | None = None
+    delta: MapDelta | None = None
+    status: RobotStatus | None = None
+
+
+@dataclass
+class AgentStats:
+    scans: int = 0
+    keyframes: int = 0
+    plans: int = 0
+    plan_failures: int = 0
+    distance_m: float = 0.0
+    slam_ms: list[float] = field(default_factory=list)
+
+
+class RobotAgent:
+    def __init__(self, robot_id: str, cfg: Config, start_pose=(0.0, 0.0, 0.0)) -> None:
+        self.id = check_name(robot_id, "robot id")
+        self.cfg = cfg
+        self.start_pose = np.array(start_pose, dtype=float)
+        self.slam = PolySlam(cfg.slam, cfg.map.cell_size_m, self.start_pose)
+        self.radius = cfg.nav.robot_radius_m + cfg.nav.clearance_margin_m
+        rc = cfg.sim.robot
+        self.follower = PathFollower(
+            ControlParams(
+                radius_m=cfg.nav.robot_radius_m,
+                max_v_mps=rc.max_linear_mps,
+                max_w_radps=rc.max_angular_radps,
+            )
+        )
+        self.merged: GridPolyMap | None = None
+        self.merged_graph: NavGraph | None = None
+        self.own_graph: NavGraph | None = None
+        self._own_graph_version = -1
+        self.assignment: Assignment | None = None
+        self.state = RobotState.IDLE
+        self.detail = ""
+        self.pose = self.start_pose.copy()
+        self._odom_t: list[float] = []
+        self._odom: list[np.ndarray] = []
+        self._last_plan_t = -math.inf
+        self._best_remaining = math.inf
+        self._progress_t = 0.0
+        self._last_pose_t = -math.inf
+        self._last_status_t = -math.inf
+        self._status_dirty = True
+        self._last_odom_xy: np.ndarray | None = None
+        self._facing = False  # at the goal, turning towards the frontier
+        self.peers: dict[str, tuple[float, np.ndarray]] = {}  # other robots: (stamp, xy)
+        self._blocked_since: float | None = None
+        self._yield_until: float | None = None
+        self._blocked_by = ""
+        self._resume = False
+        self.stats = AgentStats()
+        self.bytes_sent = 0  # maintained by the transport
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def on_odom(self, stamp_s: float, odom: Odometry) -> None:
+        pose = np.array([odom.x, odom.y, odom.theta])
+        if self._odom_t and stamp_s < self._odom_t[-1]:
+            log.warning(
+                "%s: odometry went back in time (%.3f < %.3f)", self.id, stamp_s, self._odom_t[-1]
+            )
+            self._odom_t.clear()
+            self._odom.clear()
+        self._odom_t.append(stamp_s)
+        self._odom.append(pose)
+        if len(self._odom_t) > ODOM_BUFFER:
+            del self._odom_t[: -ODOM_BUFFER // 2]
+            del self._odom[: -ODOM_BUFFER // 2]
+        if self._last_odom_xy is not None:
+            self.stats.distance_m += float(np.hypot(*(pose[:2] - self._last_odom_xy)))
+        self._last_odom_xy = pose[:2]
+
+    def odom_at(self, stamp_s: float) -> np.ndarray | None:
+        """Odometry at ``stamp_s``: interpolated between the two around it."""
+        if not self._odom_t:
+            return None
+        k = bisect.bisect_left(self._odom_t, stamp_s)
+        if k == 0:
+            return self._odom[0]
+        if k >= len(self._odom_t):
+            return self._odom[-1]
+        t0, t1 = self._odom_t[k - 1], self._odom_t[k]
+        a, b = self._odom[k - 1], self._odom[k]
+        f = 0.0 if t1 <= t0 else (stamp_s - t0) / (t1 - t0)
+        dth = math.remainder(b[2] - a[2], 2 * math.pi)
+        return np.array([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * dth])
+
+    def on_assignment(self, a: Assignment, now_s: float) -> None:
+        same = (
+            self.assignment is not None
+            and a.target == self.assignment.target
+            and a.kind == self.assignment.kind
+        )
+        self.assignment = a
+        if same:
+            return
+        log.info("%s: assignment %s %d at (%.1f, %.1f)", self.id, a.kind, a.target, *a.goal)
+        self.follower.set_path(None)
+        self._facing = False
+        if a.kind == AssignmentKind.STOP:
+            self._set_state(RobotState.IDLE, "stopped by the coordinator")
+            return
+        self._plan(now_s)
+
+    def on_merged_map(self, pmap: GridPolyMap) -> None:
+        """A full merged map (first contact or resync)."""
+        self.merged = pmap
+        self.merged_graph = NavGraph.build(pmap, self.radius)
+
+    def on_merged_delta(self, delta: MapDelta) -> None:
+        """Raises DeltaGapError when a delta was missed (fetch the full map)."""
+        if self.merged is None:
+            raise DeltaGapError("no merged map yet")
+        self.merged = self.merged.apply_delta(delta)
+        self.merged_graph.update(self.merged, {c.index for c in delta.cells})
+
+    # -- the per-scan step ------------------------------------------------------------------
+
+    def on_scan(self, stamp_s: float, scan: LaserScan) -> Outbox:
+        out = Outbox()
+        self.stats.scans += 1
+        # 1. odometry at the scan time
+        odom = self.odom_at(stamp_s)
+        if odom is None:
+            return out
+        # 2. PolySLAM: pose, and on keyframes the map delta
+        step = self.slam.process(scan, odom)
+        self.pose = step.pose
+        if step.keyframe:
+            self.stats.keyframes += 1
+            self.stats.slam_ms.append(step.timings_ms.get("total", 0.0))
+        out.delta = step.delta
+        # 3. navigation: replan as the map grows
+        if self.assignment is not None and self.assignment.kind != AssignmentKind.STOP:
+            due = stamp_s - self._last_plan_t >= REPLAN_PERIOD_S
+            if due or (self.follower.path is None and self.state == RobotState.NAVIGATING):
+                self._plan(stamp_s)
+        # 4. local control around the path, avoiding what the scan sees (farther from
+        #    what the map does not explain: other robots, people)
+        pts = scan_to_points(scan, self.cfg.slam.frontier_range_m, self._mount())
+        xy = pts.xy[pts.valid]
+        cmd = self.follower.command(self.pose, xy, self._unexplained(xy))
+        out.cmd = (cmd.v_mps, cmd.w_radps)
+        if self._facing:
+            out.cmd = self._face_frontier()
+        # 5. state for the coordinator; two robots blocking each other: one gives way
+        if self._yield_until is not None:
+            self._end_yield(cmd.state, stamp_s)
+        else:
+            self._track(cmd.state, stamp_s)
+            self._watch_deadlock(cmd.state, stamp_s)
+        if stamp_s - self._last_pose_t >= POSE_PERIOD_S or step.delta is not None:
+            self._last_pose_t = stamp_s
+            out.pose = Pose(*map(float, self.pose), self.slam.map.version, self._blocked_by)
+        if self._status_dirty or stamp_s - self._last_status_t >= STATUS_PERIOD_S:
+            self._last_status_t = stamp_s
+            self._status_dirty = False
+            out.status = self.status()
+        return out
+
+    def on_peer_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
+        if rid == self.id:
+            return
+        self.peers[rid] = (stamp_s, np.array([pose.x, pose.y]))
+        if pose.blocked_by == self.id and self._yield_until is None:
+            # I stand in its way: give way unless we block each other and I go first
+            mutual = self._blocked_by == rid and _priority(self.id) < _priority(rid)
+            if not mutual and not self._facing:
+                self._give_way(rid, self.peers[rid][1], stamp_s)
+
+    def _unexplained(self, xy_robot: np.ndarray) -> np.ndarray:
+        """Scan points (robot frame) farther than ``UNEXPLAINED_M`` from every obstacle
+        vector of the robot's own map: something that moves, or not mapped yet."""
+        if len(xy_robot) == 0:
+            return np.zeros(0, dtype=bool)
+        world = transform_points(self.pose, xy_robot)
+        m = self.slam.map
+        st, en, _ = m.vectors([VectorType.OBSTACLE], m.cells_within(*self.pose[:2], NEAR_M))
+        return clear_of(world, st, en, UNEXPLAINED_M)
+
+    def _watch_deadlock(self, follow: Follow, now_s: float) -> None:
+        if follow != Follow.BLOCKED:
+            self._blocked_since = None
+            self._blocked_by = ""
+            return
+        if self._blocked_since is None:
+            self._blocked_since = now_s
+            return
+        if now_s - self._blocked_since < DEADLOCK_S:
+            return
+        peer = self._nearest_peer(now_s)
+        self._blocked_by = "" if peer is None else peer[0]  # told to it with the pose
+        if peer is None or _priority(self.id) < _priority(peer[0]):
+            return  # nobody to give way to, or the other robot gives way
+        self._give_way(peer[0], peer[1], now_s)
+
+    def _give_way(self, rid: str, other: np.ndarray, now_s: float) -> None:
+        goal = self._yield_point(other)
+        if goal is None:
+            return
+        log.info("%s: giving way to %s", self.id, rid)
+        self._yield_until = now_s + YIELD_S
+        self._blocked_since = None
+        self._blocked_by = ""
+        self._resume = self.follower.path is not None or self.state == RobotState.NAVIGATING
+        self.follower.set_path(np.array([self.pose[:2], goal]))
+
+    def _nearest_peer(self, now_s: float):
+        best = None
+        for rid, (t, xy) in self.peers.items():
+            d = float(np.hypot(*(xy - self.pose[:2])))
+            if now_s - t <= PEER_FRESH_S and d <= PEER_NEAR_M and (best is None or d < best[2]):
+                best = (rid, xy, d)
+        return best
+
+    def _yield_point(self, other: np.ndarray) -> np.ndarray | None:
+        """A free point about a metre away from the other robot."""
+        away = self.pose[:2] - other
+        base = math.atan2(away[1], away[0])
+        m = self.slam.map
+        st, en, _ = m.vectors(
+            [VectorType.OBSTACLE, VectorType.FRONTIER], m.cells_within(*self.pose[:2], NEAR_M)
+        )
+        for turn in (0.0, 0.6, -0.6, 1.2, -1.2, 1.8, -1.8):
+            for dist in (1.0, 0.6):
+                a = base + turn
+                p = self.pose[:2] + dist * np.array([math.cos(a), math.sin(a)])
+                if m.is_free(*p) and clear_of(p[None, :], st, en, self.radius)[0]:
+                    return p
+        return None
+
+    def _end_yield(self, follow: Follow, now_s: float) -> None:
+        if follow == Follow.ARRIVED or now_s >= self._yield_until:
+            self._yield_until = None
+            self.follower.set_path(None)
+            if self._resume:
+                self._plan(now_s)
+
+    def _face_frontier(self) -> tuple[float, float]:
+        """Turn in place towards the assigned frontier; then report it reached."""
+        pts = np.array(self.assignment.frontier)
+        mid = pts[len(pts) // 2] if len(pts) > 2 else pts.mean(axis=0)
+        bearing = math.remainder(
+            math.atan2(mid[1] - self.pose[1], mid[0] - self.pose[0]) - self.pose[2], 2 * math.pi
+        )
+        if abs(bearing) <= FACING_RAD:
+            self._facing = False
+            self.slam.request_keyframe()  # what it sees now goes into the map
+            self._set_state(RobotState.REACHED)
+            return (0.0, 0.0)
+        w = self.cfg.sim.robot.max_angular_radps
+        return (0.0, math.copysign(min(w, 2.0 * abs(bearing)), bearing))
+
+    def _mount(self):
+        m = self.cfg.slam.mount
+        return (m.x_m, m.y_m, m.yaw_rad, m.upside_down)
+
+    def status(self) -> RobotStatus:
+        return RobotStatus(
+            self.state,
+            -1 if self.assignment is None else self.assignment.target,
+            self.detail[:200],
+            self.slam.keyframes,
+            self.slam.map.version,
+            self.bytes_sent,
+            self.stats.distance_m,
+        )
+
+    def _set_state(self, state: RobotState, detail: str = "") -> None:
+        if state != self.state or detail != self.detail:
+            log.info("%s: %s %s", self.id, state, detail)
+            self.state, self.detail = state, detail
+            self._status_dirty = True
+
+    def _planning_map(self) -> tuple[GridPolyMap, NavGraph]:
+        if self.merged is not None and self.merged_graph is not None:
+            return self.merged, self.merged_graph
+        own = self.slam.map
+        if self.own_graph is None or self._own_graph_version != own.version:
+            self.own_graph = NavGraph.build(own, self.radius)
+            self._own_graph_version = own.version
+        return own, self.own_graph
+
+    def _plan(self, now_s: float) -> None:
+        a = self.assignment
+        if a is None or a.kind == AssignmentKind.STOP:
+            return
+        self._last_plan_t = now_s
+        pmap, graph = self._planning_map()
+        self.stats.plans += 1
+        try:
+            path = Planner(pmap, graph).plan(self.pose[:2], np.array(a.goal))
+        except PlanningError as e:
+            self.stats.plan_failures += 1
+            self.follower.set_path(None)
+            self._set_state(RobotState.UNREACHABLE, str(e))
+            return
+        first = self.follower.path is None
+        self.follower.set_path(path.points)
+        if first or self.state not in (RobotState.NAVIGATING,):
+            self._best_remaining = math.inf
+            self._progress_t = now_s
+        self._set_state(RobotState.NAVIGATING, f"{path.length_m:.1f} m to go")
+
+    def _track(self, follow: Follow, now_s: float) -> None:
+        if self.assignment is None or self.follower.path is None:
+            return
+        if follow == Follow.ARRIVED:
+            self.follower.set_path(None)
+            home = self.assignment.kind == AssignmentKind.HOME
+            if not home and self.assignment.frontier:
+                self._facing = True  # look at the frontier before reporting
+                return
+            self._set_state(RobotState.HOME if home else RobotState.REACHED)
+            return
+        remaining = self.follower.remaining_m(self.pose)
+        if remaining < self._best_remaining - PROGRESS_M:
+            self._best_remaining = remaining
+            self._progress_t = now_s
+        elif now_s - self._progress_t > STUCK_TIMEOUT_S:
+            self._set_state(RobotState.STUCK, f"no progress for {STUCK_TIMEOUT_S:.0f} s")
+            self._progress_t = now_s
+            self._best_remaining = math.inf
+            self._plan(now_s)
+
+
+def _priority(robot_id: str) -> tuple:
+    """Robots give way in id order (r2 gives way to r1; r10 to r9)."""
+    digits = "".join(ch for ch in robot_id if ch.isdigit())
+    return (int(digits) if digits else 0, robot_id)
+
+
+def scan_from_message(msg: Scan, stamp_s: float) -> LaserScan:
+    return LaserScan(
+        msg.ranges_m,
+        msg.angle_min_rad,
+        msg.angle_increment_rad,
+        msg.range_min_m,
+        msg.range_max_m,
+        stamp_s,
+    )
+
+
+# --- the process --------------------------------------------------------------------------------
+
+
+def run_agent(
+    robot_id: str,
+    cfg: Config,
+    start_pose,
+    session_spec,
+    stop: threading.Event | None = None,
+    duration_s: float = 0.0,
+) -> RobotAgent:
+    """Run the agent on a Zenoh session until ``stop`` is set (or SIGINT/SIGTERM)."""
+    from agents.session import Bus, is_alive_change, open_session, stop_on_signals
+
+    stop = stop or stop_on_signals()
+    keys = SwarmKeys(cfg.comms.swarm)
+    me = keys.robot(robot_id)
+    agent = RobotAgent(robot_id, cfg, start_pose)
+    t_end = time.monotonic() + duration_s if duration_s > 0 else math.inf
+    with open_session(session_spec) as session:
+        bus = Bus(session, robot_id)
+        try:
+            bus.subscribe(me.odom, Odometry)
+            bus.subscribe(keys.all_robots("pose"), Pose)
+            bus.subscribe(me.scan, Scan)
+            bus.subscribe(keys.assignment(robot_id), Assignment)
+            bus.subscribe(keys.merged_delta, MapChunk)
+            bus.serve_map(me.map, lambda: (encode_map(agent.slam.map), agent.slam.map.version))
+            bus.declare_alive(keys.alive("agent", robot_id))
+            bus.watch_alive(keys.all_alive("coordinator"))
+            log.info("agent %s up (start pose %s)", robot_id, tuple(agent.start_pose))
+            need_merged = False
+            while not stop.is_set() and time.monotonic() < t_end:
+                for item in bus.poll(timeout_s=0.05):
+                    alive = is_alive_change(item)
+                    if alive is not None:
+                        need_merged |= alive
+                        continue
+                    msg = item.msg
+                    try:
+                        if isinstance(msg, Odometry):
+                            agent.on_odom(item.stamp_s, msg)
+                        elif isinstance(msg, Scan):
+                            out = agent.on_scan(item.stamp_s, scan_from_message(msg, item.stamp_s))
+                            _send(bus, me, agent, out, item.stamp_s, item.seq)
+                        elif isinstance(msg, Pose):
+                            rid = keys.robot_of(item.key)
+                            if rid is not None:
+                                agent.on_peer_pose(rid, item.stamp_s, msg)
+                        elif isinstance(msg, Assignment):
+                            agent.on_assignment(msg, item.stamp_s)
+                        elif isinstance(msg, MapChunk) and item.payload is not None:
+                            try:
+                                agent.on_merged_delta(decode_delta(item.payload))
+                            except MapError:  # a gap (or no map yet): resync
+                                need_merged = True
+                    except DecodeError as e:
+                        log.warning("%s: rejected %s: %s", robot_id, item.key, e)
+                    except PolyswarmError as e:
+                        log.warning("%s: %s", robot_id, e)
+                if need_merged:
+                    got = bus.fetch_map(keys.merged_map, timeout_s=2.0)
+                    if got is not None:
+                        try:
+                            agent.on_merged_map(decode_map(got[0]))
+                            need_merged = False
+                        except DecodeError as e:
+                            log.warning("%s: bad merged map: %s", robot_id, e)
+        finally:
+            bus.close()
+    return agent
+
+
+def _send(bus, me, agent: RobotAgent, out: Outbox, stamp_s: float, scan_seq: int) -> None:
+    if out.cmd is not None:
+        bus.publish(me.cmd_vel, CmdVel(out.cmd[0], out.cmd[1], scan_seq), stamp_s)
+    sent = 0
+    if out.delta is not None:
+        d = out.delta
+        sent += bus.publish_map(
+            me.map_delta, MapKind.DELTA, encode_delta(d), d.base_version, d.version, stamp_s
+        )
+    if out.pose is not None:
+        sent += bus.publish(me.pose, out.pose, stamp_s)
+    if out.status is not None:
+        sent += bus.publish(me.status, out.status, stamp_s, reliable=True)
+    agent.bytes_sent = bus.total_bytes_sent - bus.bytes_sent.get(me.cmd_vel, 0)

@@ -1,0 +1,184 @@
+"""Local control: follow a planned path while avoiding what the live scan sees.
+
+A dynamic-window controller (Fox, Burgard and Thrun 1997) around a pure-pursuit
+carrot: candidate (v, w) pairs are rolled out for ``horizon_s``; arcs that come closer
+than the robot radius plus a margin to any scan point (walls, other robots, anything
+the map does not know) are refused; the rest are scored by heading towards the carrot,
+speed and clearance. A carrot far to the side turns the robot in place first (a round
+robot turning in place sweeps nothing).
+
+    ctl = PathFollower(ControlParams(radius_m=0.2, max_v_mps=0.5, max_w_radps=1.5))
+    ctl.set_path(path_xy)
+    cmd = ctl.command(pose, scan_xy_robot_frame)   # Command(v, w, state)
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from polyswarm.se2 import wrap
+
+CREEP_MARGIN_M = 0.01  # blocked at the normal margin: creep past with this much room
+CREEP_MPS = 0.1
+
+
+class Follow(StrEnum):
+    IDLE = "idle"
+    DRIVING = "driving"
+    TURNING = "turning"
+    BLOCKED = "blocked"  # no admissible motion towards the carrot
+    ARRIVED = "arrived"
+
+
+@dataclass(frozen=True)
+class ControlParams:
+    radius_m: float = 0.2
+    max_v_mps: float = 0.5
+    max_w_radps: float = 1.5
+    lookahead_m: float = 0.6  # carrot distance along the path
+    goal_tolerance_m: float = 0.25
+    safety_margin_m: float = 0.03  # arcs keep radius + this from every scan point (3 sigma)
+    dynamic_margin_m: float = 0.2  # ... and this much more from what the map does not explain
+    horizon_s: float = 1.2  # arcs are rolled out this far
+    turn_in_place_rad: float = 1.0  # carrot farther off the heading: turn first
+    v_samples: int = 6
+    w_samples: int = 15
+
+
+@dataclass(frozen=True)
+class Command:
+    v_mps: float
+    w_radps: float
+    state: Follow
+
+
+class PathFollower:
+    def __init__(self, params: ControlParams) -> None:
+        self.p = params
+        self.path: np.ndarray | None = None
+        self._progress = 0  # index of the path segment the robot is on
+        vs = np.linspace(0.0, params.max_v_mps, params.v_samples)
+        ws = np.linspace(-params.max_w_radps, params.max_w_radps, params.w_samples)
+        v, w = np.meshgrid(vs, ws, indexing="ij")
+        self._v, self._w = v.ravel(), w.ravel()
+        steps = np.linspace(params.horizon_s / 6, params.horizon_s, 6)
+        # rolled-out positions of every candidate (robot frame), (n_cand, n_steps, 2)
+        th = self._w[:, None] * steps[None, :]
+        straight = np.abs(self._w) < 1e-6
+        wsafe = np.where(straight, 1.0, self._w)[:, None]
+        x = np.where(
+            straight[:, None], self._v[:, None] * steps, self._v[:, None] * np.sin(th) / wsafe
+        )
+        y = np.where(straight[:, None], 0.0, self._v[:, None] * (1 - np.cos(th)) / wsafe)
+        self._arcs = np.stack([x, y], axis=-1)
+        self._end_heading = th[:, -1]
+
+    def set_path(self, points: np.ndarray | None) -> None:
+        self.path = None if points is None or len(points) == 0 else np.asarray(points, float)
+        self._progress = 0
+
+    @property
+    def goal(self) -> np.ndarray | None:
+        return None if self.path is None else self.path[-1]
+
+    def remaining_m(self, pose) -> float:
+        if self.path is None:
+            return 0.0
+        p = np.asarray(pose[:2], dtype=float)
+        rest = self.path[self._progress + 1 :]
+        if len(rest) == 0:
+            return float(np.hypot(*(self.path[-1] - p)))
+        return float(np.hypot(*(rest[0] - p)) + np.hypot(*np.diff(rest, axis=0).T).sum())
+
+    def command(self, pose, obstacles_xy: np.ndarray, moving: np.ndarray | None = None) -> Command:
+        """Velocity for the robot at ``pose`` (map frame) given scan points in the robot
+        frame (metres, x forward). ``moving`` flags points the map does not explain
+        (other robots, people): they are kept ``dynamic_margin_m`` farther away."""
+        if self.path is None:
+            return Command(0.0, 0.0, Follow.IDLE)
+        pose = np.asarray(pose, dtype=float)
+        if np.hypot(*(self.path[-1] - pose[:2])) <= self.p.goal_tolerance_m:
+            return Command(0.0, 0.0, Follow.ARRIVED)
+        carrot = self._carrot(pose[:2])
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        d = carrot - pose[:2]
+        local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
+        bearing = math.atan2(local[1], local[0])
+        if abs(bearing) > self.p.turn_in_place_rad:
+            w = math.copysign(self.p.max_w_radps, bearing) * min(1.0, abs(bearing))
+            return Command(0.0, w, Follow.TURNING)
+        obs = np.asarray(obstacles_xy, dtype=float).reshape(-1, 2)
+        extra = np.zeros(len(obs)) if moving is None else np.where(moving, 1.0, 0.0)
+        return self._window(local, bearing, obs, extra)
+
+    def _carrot(self, p: np.ndarray) -> np.ndarray:
+        path = self.path
+        if len(path) == 1:
+            return path[0]
+        # advance along the path: the closest segment at or after the current one
+        a, b = path[:-1], path[1:]
+        ab = b - a
+        L2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+        t = np.clip(np.einsum("ij,ij->i", p - a, ab) / L2, 0.0, 1.0)
+        dist = np.hypot(*(a + t[:, None] * ab - p).T)
+        window = slice(self._progress, min(len(a), self._progress + 4))
+        k = self._progress + int(np.argmin(dist[window]))
+        self._progress = k
+        # walk lookahead metres along the path from the projection
+        q = a[k] + t[k] * ab[k]
+        left = self.p.lookahead_m
+        pts = np.vstack([q, path[k + 1 :]])
+        for u, v in itertools.pairwise(pts):
+            seg = float(np.hypot(*(v - u)))
+            if seg >= left:
+                return u + (v - u) * (left / max(seg, 1e-12))
+            left -= seg
+        return path[-1]
+
+    def _window(
+        self, carrot: np.ndarray, bearing: float, obstacles: np.ndarray, moving: np.ndarray
+    ) -> Command:
+        p = self.p
+        reach = p.max_v_mps * p.horizon_s + p.radius_m + p.safety_margin_m + p.dynamic_margin_m
+        near = np.hypot(obstacles[:, 0], obstacles[:, 1]) < reach + 0.5
+        obs, moving = obstacles[near], moving[near]
+        if len(obs):
+            diff = self._arcs[:, :, None, :] - obs[None, None, :, :]
+            dist = np.sqrt((diff**2).sum(-1)).min(axis=1)  # (candidates, points)
+        else:
+            dist = np.full((len(self._v), 0), np.inf)
+        # progress: how much closer the arc's end is to the carrot, and its heading there
+        end = self._arcs[:, -1, :]
+        to_carrot = np.arctan2(carrot[1] - end[:, 1], carrot[0] - end[:, 0])
+        err = np.abs(wrap(to_carrot - self._end_heading))
+        gain = np.hypot(*carrot) - np.hypot(*(carrot - end).T)
+        forward = self._v > 0
+        for need, dyn, v_cap in (
+            (p.radius_m + p.safety_margin_m, p.dynamic_margin_m, p.max_v_mps),
+            # squeeze past slowly
+            (p.radius_m + CREEP_MARGIN_M, 0.5 * p.dynamic_margin_m, CREEP_MPS),
+        ):
+            if dist.shape[1]:
+                clear = (dist - dyn * moving[None, :]).min(axis=1)
+            else:
+                clear = np.full(len(self._v), np.inf)
+            ok = forward & (clear >= need) & (self._v <= v_cap + 1e-9) & (gain > 0)
+            if ok.any():
+                score = (
+                    2.0 * gain / max(p.max_v_mps * p.horizon_s, 1e-9)
+                    - 0.5 * err
+                    + 0.5 * np.minimum(clear - need, 0.3)
+                )
+                k = int(np.argmax(np.where(ok, score, -np.inf)))
+                return Command(float(self._v[k]), float(self._w[k]), Follow.DRIVING)
+        # nothing moving forward is safe: turn towards the carrot (a round robot turning
+        # in place touches nothing), else wait for the way to clear
+        if abs(bearing) > 0.15:
+            w = math.copysign(min(p.max_w_radps, 2.0 * abs(bearing)), bearing)
+            return Command(0.0, w, Follow.BLOCKED)
+        return Command(0.0, 0.0, Follow.BLOCKED)

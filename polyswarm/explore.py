@@ -1,0 +1,375 @@
+"""Frontier-based exploration: targets, path costs and assignment strategies.
+
+* ``frontier_targets``: the merged map's frontier vectors chained into segments, each
+  with a goal point in explored free space from which the robot sees the frontier;
+* ``path_costs``: shortest-path lengths over the navigation graph from every robot to
+  every goal (one Dijkstra per robot, scipy);
+* ``assign``: which robot goes where, by strategy:
+  - ``hungarian``: optimal one-to-one assignment of robots to targets minimising
+    ``cost - utility`` (scipy ``linear_sum_assignment``), targets spread apart;
+  - ``greedy``: Burgard-style sequential cost-utility with utility discounted around
+    targets already taken;
+  - ``nearest``: explore_lite-style, every robot its own best target, no coordination.
+  All keep a robot's current target unless another is clearly better (hysteresis).
+
+    targets = frontier_targets(merged, graph, min_length_m=0.4, max_length_m=4.0)
+    costs = path_costs(graph, merged, robot_xy, [t.goal for t in targets])
+    choice = assign(Strategy.HUNGARIAN, costs, [t.utility_m for t in targets], current)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from polyswarm.frontiers import FrontierSegment, extract_frontiers, point_along
+from polyswarm.navgraph import NavGraph, clear_of, node_of
+from polyswarm.polymap import GridPolyMap, VectorType
+
+GOAL_OFFSETS_M = (0.6, 1.0, 1.5, 0.35)  # goal candidates this far inside the free side
+GOAL_ALONG = (0.5, 0.25, 0.75)  # ... at these fractions along the frontier
+FALLBACK_RADIUS_M = 4.0  # ... else the nearest graph node this close that sees the frontier
+UTILITY_CAP_M = 6.0  # a frontier longer than this is worth no more
+UTILITY_WEIGHT = 1.0  # metres of path a metre of frontier is worth
+UNREACHABLE = math.inf
+
+
+class Strategy(StrEnum):
+    HUNGARIAN = "hungarian"
+    GREEDY = "greedy"
+    NEAREST = "nearest"
+
+
+@dataclass(frozen=True, eq=False)
+class Target:
+    goal: np.ndarray  # (2,) a point of explored free space with clearance
+    frontier: FrontierSegment
+    utility_m: float  # frontier length, capped
+
+    @property
+    def midpoint(self) -> np.ndarray:
+        return self.frontier.midpoint
+
+
+def frontier_targets(
+    pmap: GridPolyMap,
+    graph: NavGraph,
+    min_length_m: float = 0.4,
+    max_length_m: float = 4.0,
+    separation_m: float = 0.0,
+    blacklist: list[np.ndarray] | tuple = (),
+    blacklist_radius_m: float = 1.0,
+    reach: Reach | None = None,
+) -> list[Target]:
+    """Frontier segments with a reachable goal point, longest first.
+
+    A goal is the first candidate (offsets ``GOAL_OFFSETS_M`` into the free side, at
+    ``GOAL_ALONG`` of the frontier) that lies in a navigation-graph node (one the
+    robots can reach, given ``reach``) and at least the graph's radius from every
+    obstacle vector; else the nearest such node within ``FALLBACK_RADIUS_M`` that sees
+    the frontier (a frontier seen through a door is looked at from the door).
+    Frontiers with no goal, or near a blacklisted point, are not targets.
+    ``separation_m`` > 0 keeps one target per neighbourhood (the longest frontier)."""
+    usable = graph.has_node if reach is None else reach.reaches
+    segs = extract_frontiers(pmap, min_length_m, max_length_m)
+    if not segs:
+        return []
+    cands, owner = [], []
+    for k, seg in enumerate(segs):
+        d = seg.end - seg.start
+        n = np.hypot(*d)
+        if n < 1e-9:
+            continue
+        left = np.array([-d[1], d[0]]) / n  # explored space is on the left
+        for f in GOAL_ALONG:
+            p = point_along(seg.points, f * seg.length_m)
+            for off in GOAL_OFFSETS_M:
+                cands.append(p + off * left)
+                owner.append(k)
+    if not cands:
+        return []
+    cands = np.array(cands)
+    owner = np.array(owner)
+    free = pmap.is_free_many(cands)
+    cells = {pmap.cell_index(*c) for c in cands[free]}
+    obstacle_ok = np.zeros(len(cands), dtype=bool)
+    if free.any():
+        # clearance to obstacles only: the goal may be close to its frontier
+        st, en, _ = pmap.vectors([VectorType.OBSTACLE], _near_cells(pmap, cells))
+        obstacle_ok[free] = clear_of(cands[free], st, en, graph.radius)
+    out = []
+    black = np.array(blacklist, dtype=float).reshape(-1, 2)
+    node_pts = None
+    for k, seg in enumerate(segs):
+        idx = np.nonzero((owner == k) & obstacle_ok)[0]
+        goal = None
+        for i in idx:
+            node = node_of(pmap, *cands[i])
+            if node is not None and usable(node):
+                goal = cands[i]
+                break
+        if goal is None:  # no room in front of it (a thin wedge seen through a door)
+            if node_pts is None:
+                node_pts = _node_points(graph, usable)
+            goal = _nearest_view_point(pmap, node_pts, seg.midpoint)
+        if goal is None:
+            continue
+        if len(black) and (
+            np.hypot(*(black - goal).T).min() < blacklist_radius_m
+            or np.hypot(*(black - seg.midpoint).T).min() < blacklist_radius_m
+        ):
+            continue
+        out.append(Target(goal, seg, min(seg.length_m, UTILITY_CAP_M)))
+    out.sort(key=lambda t: -t.frontier.length_m)
+    if separation_m > 0:
+        kept: list[Target] = []
+        for t in out:
+            if all(np.hypot(*(t.goal - o.goal)) >= separation_m for o in kept):
+                kept.append(t)
+        out = kept
+    return out
+
+
+def _node_points(graph: NavGraph, usable) -> np.ndarray:
+    pts = [p for cg in graph.cells.values() for n, p in cg.nodes.items() if usable(n)]
+    return np.array(pts, dtype=float).reshape(-1, 2)
+
+
+def _nearest_view_point(pmap: GridPolyMap, nodes: np.ndarray, target: np.ndarray):
+    """The graph node point nearest to ``target`` (within ``FALLBACK_RADIUS_M``) that
+    sees it: the straight line between them crosses no obstacle vector."""
+    if len(nodes) == 0:
+        return None
+    d = np.hypot(*(nodes - target).T)
+    order = np.argsort(d)
+    order = order[d[order] <= FALLBACK_RADIUS_M]
+    if len(order) == 0:
+        return None
+    s, e, _ = pmap.vectors(
+        [VectorType.OBSTACLE], pmap.cells_within(target[0], target[1], FALLBACK_RADIUS_M)
+    )
+    for k in order[:32]:
+        if not _crosses_any(nodes[k], target, s, e):
+            return nodes[k].copy()
+    return None
+
+
+def _crosses_any(a: np.ndarray, b: np.ndarray, s: np.ndarray, e: np.ndarray) -> bool:
+    """Does segment a-b properly cross any segment s[k]-e[k]?"""
+    if len(s) == 0:
+        return False
+
+    def orient(p, q, r):
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (
+            r[..., 0] - p[..., 0]
+        )
+
+    d1, d2 = orient(s, e, a), orient(s, e, b)
+    d3, d4 = orient(a, b, s), orient(a, b, e)
+    return bool(np.any((d1 * d2 < 0) & (d3 * d4 < 0)))
+
+
+def _near_cells(pmap: GridPolyMap, cells) -> list:
+    return sorted(
+        {(i + di, j + dj) for i, j in cells for di in (-1, 0, 1) for dj in (-1, 0, 1)}
+        & set(pmap.cells)
+    )
+
+
+# --- path costs ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GraphIndex:
+    """The navigation graph as a sparse matrix (edge weight: metres via the opening)."""
+
+    nodes: list
+    index: dict
+    matrix: csr_matrix
+
+    @classmethod
+    def build(cls, graph: NavGraph) -> GraphIndex:
+        nodes = [n for cg in graph.cells.values() for n in cg.nodes]
+        index = {n: k for k, n in enumerate(nodes)}
+        rows, cols, w = [], [], []
+
+        def add(a, b, portal) -> None:
+            ia, ib = index.get(a), index.get(b)
+            if ia is None or ib is None:
+                return
+            m = portal.mid
+            d = float(np.hypot(*(graph.point(a) - m)) + np.hypot(*(m - graph.point(b))))
+            d = max(d, 1e-6)  # csgraph treats zero as "no edge"
+            rows.extend((ia, ib))
+            cols.extend((ib, ia))
+            w.extend((d, d))
+
+        for cg in graph.cells.values():
+            for (a, b), p in cg.internal.items():
+                add(a, b, p)
+        for edges in graph.borders.values():
+            for (a, b), p in edges.items():
+                add(a, b, p)
+        n = len(nodes)
+        return cls(nodes, index, csr_matrix((w, (rows, cols)), shape=(n, n)))
+
+
+@dataclass
+class Reach:
+    """Shortest paths over the graph from every robot (one Dijkstra per robot).
+
+    A point joins the graph at the node of the convex piece holding it (or the nearest
+    node within a metre, for a robot standing close to a wall)."""
+
+    graph: NavGraph
+    pmap: GridPolyMap
+    index: GraphIndex
+    sources: list  # per robot: (node index, metres to it) or None
+    dist: np.ndarray  # (robots with a node, nodes)
+
+    @classmethod
+    def from_robots(
+        cls, graph: NavGraph, pmap: GridPolyMap, robots_xy: list, index: GraphIndex | None = None
+    ) -> Reach:
+        index = index or GraphIndex.build(graph)
+        src = [_join(graph, pmap, index, p) if index.nodes else None for p in robots_xy]
+        rows = [s[0] for s in src if s is not None]
+        if rows:
+            dist = dijkstra(index.matrix, directed=False, indices=rows)
+        else:
+            dist = np.full((0, len(index.nodes)), np.inf)
+        return cls(graph, pmap, index, src, np.atleast_2d(dist))
+
+    def reaches(self, node) -> bool:
+        """Can some robot reach this node?"""
+        k = self.index.index.get(node)
+        return k is not None and len(self.dist) > 0 and bool(np.isfinite(self.dist[:, k]).any())
+
+    def costs(self, goals: list) -> np.ndarray:
+        """(robots, goals) path lengths in metres (inf: unreachable)."""
+        out = np.full((len(self.sources), len(goals)), UNREACHABLE)
+        dst = [_join(self.graph, self.pmap, self.index, g) for g in goals]
+        row = 0
+        for k, s in enumerate(self.sources):
+            if s is None:
+                continue
+            for j, d in enumerate(dst):
+                if d is not None and math.isfinite(self.dist[row, d[0]]):
+                    out[k, j] = s[1] + self.dist[row, d[0]] + d[1]
+            row += 1
+        return out
+
+
+def path_costs(
+    graph: NavGraph,
+    pmap: GridPolyMap,
+    sources: list[np.ndarray],
+    goals: list[np.ndarray],
+    index: GraphIndex | None = None,
+) -> np.ndarray:
+    """(len(sources), len(goals)) path lengths in metres over the graph (inf: none)."""
+    return Reach.from_robots(graph, pmap, sources, index).costs(goals)
+
+
+def _join(graph: NavGraph, pmap: GridPolyMap, index: GraphIndex, p) -> tuple[int, float] | None:
+    p = np.asarray(p, dtype=float)
+    node = node_of(pmap, *p)
+    if node is not None and node in index.index:
+        return index.index[node], float(np.hypot(*(graph.point(node) - p)))
+    best, best_d = None, 1.0  # metres: farther than this from any node is not on the graph
+    for c in pmap.cells_within(p[0], p[1], 1.0):
+        cg = graph.cells.get(c)
+        if cg is None:
+            continue
+        for n, q in cg.nodes.items():
+            d = float(np.hypot(*(q - p)))
+            if d < best_d:
+                best, best_d = n, d
+    return None if best is None else (index.index[best], best_d)
+
+
+# --- assignment ------------------------------------------------------------------------------
+
+
+def assign(
+    strategy: Strategy,
+    costs: np.ndarray,
+    utilities: np.ndarray | list,
+    current: list[int | None] | None = None,
+    hysteresis: float = 0.8,
+    goals: np.ndarray | None = None,
+    separation_m: float = 3.0,
+) -> list[int | None]:
+    """Target index per robot (None: nothing reachable).
+
+    ``costs`` (robots x targets, metres, inf = unreachable), ``utilities`` (metres of
+    frontier). ``current[r]`` is robot r's current target index in this list, whose
+    path cost counts ``hysteresis`` times (so a robot switches only for a clearly
+    better target). ``goals`` (targets x 2) are used by ``greedy`` to discount targets
+    near one already taken."""
+    n_r, n_t = costs.shape
+    if n_r == 0:
+        return []
+    if n_t == 0:
+        return [None] * n_r
+    util = np.asarray(utilities, dtype=float)
+    c = costs.copy()
+    for r, t in enumerate(current or []):
+        if t is not None and 0 <= t < n_t and math.isfinite(c[r, t]):
+            c[r, t] *= hysteresis
+    reachable = np.isfinite(c)
+    if strategy == Strategy.NEAREST:
+        score = np.where(reachable, c - UTILITY_WEIGHT * util[None, :], np.inf)
+        return [int(np.argmin(s)) if np.isfinite(s).any() else None for s in score]
+    if strategy == Strategy.GREEDY:
+        return _greedy(c, util, goals, separation_m)
+    return _hungarian(c, util)
+
+
+def _hungarian(c: np.ndarray, util: np.ndarray) -> list[int | None]:
+    n_r = c.shape[0]
+    score = c - UTILITY_WEIGHT * util[None, :]
+    big = 1e6 + np.nanmax(np.where(np.isfinite(score), np.abs(score), 0.0))
+    m = np.where(np.isfinite(score), score, big)
+    rows, cols = linear_sum_assignment(m)
+    out: list[int | None] = [None] * n_r
+    for r, t in zip(rows, cols, strict=True):
+        if np.isfinite(score[r, t]):
+            out[r] = int(t)
+    # more robots than targets: the rest wait (two robots on one target jam doors)
+    return out
+
+
+def _greedy(
+    c: np.ndarray, util: np.ndarray, goals: np.ndarray | None, separation_m: float
+) -> list[int | None]:
+    """Burgard et al. 2005: robots in turn take the best cost-utility target, then the
+    utility of targets around it drops (they will be seen from there)."""
+    n_r = c.shape[0]
+    u = util.astype(float).copy()
+    out: list[int | None] = [None] * n_r
+    todo = list(range(n_r))
+    while todo:
+        best = None
+        for r in todo:
+            s = np.where(np.isfinite(c[r]), c[r] - UTILITY_WEIGHT * u, np.inf)
+            t = int(np.argmin(s))
+            if np.isfinite(s[t]) and (best is None or s[t] < best[2]):
+                best = (r, t, s[t])
+        if best is None:
+            break
+        r, t, _ = best
+        out[r] = t
+        todo.remove(r)
+        if goals is not None and separation_m > 0:
+            d = np.hypot(*(goals - goals[t]).T)
+            u = u * np.where(d < separation_m, d / separation_m, 1.0)
+        else:
+            u[t] = 0.0
+    return out

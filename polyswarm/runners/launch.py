@@ -1,0 +1,429 @@
+"""``polyswarm launch``: a whole exploration, every part its own OS process.
+
+Starts the coordinator (which hosts the Zenoh router on a loopback port), the
+simulation and one agent per robot, all talking only through Zenoh; watches the
+exploration as an observer (merged map against the world's ground truth, robot states,
+bytes sent); stops everything on mission end, time limit or Ctrl-C; writes the run
+folder. The observer never talks to the robots: it only listens.
+
+    result = launch(LaunchOptions(world="rooms", robots=2), progress=print)
+    result.metrics["t99_s"]
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+from agents.session import Bus, SessionSpec, open_session
+from polyswarm.config import Config, RobotEntry, config_to_dict, save_config, with_overrides
+from polyswarm.errors import DecodeError, MapError, PolyswarmError
+from polyswarm.polymap import GridPolyMap, MapDelta
+from protocols.keys import SwarmKeys
+from protocols.mapcodec import decode_delta, decode_map
+from protocols.messages import (
+    Clock,
+    CoordinatorStatus,
+    MapChunk,
+    MissionState,
+    Pose,
+    RobotStatus,
+    Truth,
+)
+
+log = logging.getLogger(__name__)
+
+SHUTDOWN_S = 4.0  # children get this long to exit after SIGTERM before SIGKILL
+COVERAGE_EVERY_S = 1.0  # simulated seconds between coverage samples
+START_TIMEOUT_S = 60.0  # wall seconds for all processes to come up
+
+
+@dataclass(frozen=True)
+class LaunchOptions:
+    world: str = "office"
+    robots: int = 3
+    strategy: str = "hungarian"
+    seed: int = 0
+    speed: float = 10.0  # simulated seconds per wall second (an upper bound)
+    gui: bool = False
+    time_limit_s: float = math.inf  # simulated seconds
+    wall_limit_s: float = math.inf
+    stop_coverage: float = 0.0  # > 0: stop once the coverage reaches this fraction
+    out: Path | None = None
+    config: Config = field(default_factory=Config)
+    verbose: bool = False
+
+
+@dataclass
+class RobotView:
+    state: str = "starting"
+    target: int = -1
+    bytes_sent: int = 0
+    map_delta_bytes: int = 0
+    keyframes: int = 0
+    truth: list = field(default_factory=list)  # (t, x, y, theta)
+    estimate: list = field(default_factory=list)
+    path_length_m: float = 0.0
+
+
+@dataclass
+class LaunchResult:
+    out: Path
+    metrics: dict
+    merged: GridPolyMap
+
+
+# --- the observer -------------------------------------------------------------------------------
+
+
+class Observer:
+    """Follows the exploration from the outside: coverage, states, bytes, trajectories."""
+
+    def __init__(self, world, cfg: Config, ids: list[str]) -> None:
+        self.world = world
+        self.truth_free = world.free
+        self.truth_area = float(world.free.area)
+        shapely.prepare(self.truth_free)
+        self.merged = GridPolyMap(cfg.map.cell_size_m)
+        self.robots = {rid: RobotView() for rid in ids}
+        self.sim_t = 0.0
+        self.sim_speed = 0.0
+        self.mission = MissionState.STARTING
+        self.coordinator: CoordinatorStatus | None = None
+        self.cycle_ms: list[float] = []
+        self.coverage: list[tuple[float, float]] = []
+        self.collisions = (0, 0)
+        self._cell_cover: dict = {}  # cell index -> (cell version, covered m2)
+        self._truth_cells: dict = {}
+        self.need_resync = False
+
+    # coverage = explored space inside the reachable free space, over its area
+    def covered_area(self) -> float:
+        total = 0.0
+        for ix, cell in self.merged.cells.items():
+            cached = self._cell_cover.get(ix)
+            if cached is None or cached[0] is not cell:
+                truth = self._truth_cells.get(ix)
+                if truth is None:
+                    truth = self._truth_cells[ix] = shapely.clip_by_rect(
+                        self.truth_free, *cell.bounds
+                    )
+                area = float(shapely.intersection(cell.region, truth).area) if cell.polygons else 0
+                cached = self._cell_cover[ix] = (cell, area)
+            total += cached[1]
+        return total
+
+    def coverage_now(self) -> float:
+        return self.covered_area() / max(self.truth_area, 1e-9)
+
+    def iou(self) -> float:
+        inter = self.covered_area()
+        union = self.merged.explored_area() + self.truth_area - inter
+        return inter / union if union > 0 else 0.0
+
+    def on_merged(self, delta: MapDelta) -> None:
+        self.merged = self.merged.apply_delta(delta)
+
+    def sample(self) -> None:
+        if not self.coverage or self.sim_t - self.coverage[-1][0] >= COVERAGE_EVERY_S:
+            self.coverage.append((self.sim_t, self.coverage_now()))
+
+    def handle(self, keys: SwarmKeys, item) -> None:
+        msg = item.msg
+        rid = keys.robot_of(item.key)
+        if isinstance(msg, Clock):
+            self.sim_t, self.sim_speed = msg.t_s, msg.speed
+        elif isinstance(msg, Truth):
+            self.collisions = (msg.wall_collisions, msg.robot_collisions)
+            for name, p in msg.poses.items():
+                view = self.robots.get(name)
+                if view is None:
+                    continue
+                if view.truth:
+                    view.path_length_m += math.hypot(
+                        p[0] - view.truth[-1][1], p[1] - view.truth[-1][2]
+                    )
+                view.truth.append((item.stamp_s, *p))
+        elif isinstance(msg, CoordinatorStatus):
+            self.coordinator = msg
+            self.mission = msg.state
+            self.cycle_ms.append(msg.cycle_ms)
+        elif rid in self.robots:
+            view = self.robots[rid]
+            if isinstance(msg, RobotStatus):
+                view.state, view.target = str(msg.state), msg.target
+                view.bytes_sent, view.keyframes = msg.bytes_sent, msg.keyframes
+            elif isinstance(msg, Pose):
+                view.estimate.append((item.stamp_s, msg.x, msg.y, msg.theta))
+            elif isinstance(msg, MapChunk) and item.payload is not None:
+                view.map_delta_bytes += len(item.payload)
+        elif isinstance(msg, MapChunk) and item.payload is not None:  # the merged map
+            try:
+                self.on_merged(decode_delta(item.payload))
+            except MapError:
+                self.need_resync = True
+
+    def metrics(self, wall_s: float, opts: LaunchOptions) -> dict:
+        cov = self.coverage
+
+        def first(frac: float):
+            return next((t for t, c in cov if c >= frac), None)
+
+        return {
+            "world": self.world.name,
+            "robots": len(self.robots),
+            "strategy": opts.strategy,
+            "seed": opts.seed,
+            "mission_state": str(self.mission),
+            "coverage_over_time": [[round(t, 2), round(c, 5)] for t, c in cov],
+            "t90_s": first(0.90),
+            "t99_s": first(0.99),
+            "final_coverage": cov[-1][1] if cov else 0.0,
+            "sim_time_s": self.sim_t,
+            "total_path_length_m": sum(v.path_length_m for v in self.robots.values()),
+            "per_robot_path_length_m": {k: v.path_length_m for k, v in self.robots.items()},
+            "bytes_sent_per_robot": {k: v.bytes_sent for k, v in self.robots.items()},
+            "map_delta_bytes_per_robot": {k: v.map_delta_bytes for k, v in self.robots.items()},
+            "keyframes_per_robot": {k: v.keyframes for k, v in self.robots.items()},
+            "map_iou": self.iou(),
+            "collisions": {"walls": self.collisions[0], "robots": self.collisions[1]},
+            "coordinator_cycle_p95_ms": (
+                float(np.percentile(self.cycle_ms, 95)) if self.cycle_ms else None
+            ),
+            "merged_map_bytes": None,
+            "wall_time_s": wall_s,
+        }
+
+
+# --- processes ----------------------------------------------------------------------------------
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Child:
+    name: str
+    proc: subprocess.Popen
+    log_path: Path
+
+
+def _spawn(name: str, args: list[str], logs: Path, verbose: bool) -> Child:
+    log_path = logs / f"{name}.log"
+    f = open(log_path, "w")  # noqa: SIM115 - kept open for the child's lifetime
+    cmd = [sys.executable, "-m", "polyswarm"] + (["-vv"] if verbose else ["-v"]) + args
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
+    f.close()
+    return Child(name, proc, log_path)
+
+
+def _stop_children(children: list[Child]) -> dict[str, int | None]:
+    for c in children:
+        if c.proc.poll() is None:
+            c.proc.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + SHUTDOWN_S
+    for c in children:
+        try:
+            c.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            log.warning("%s did not stop in %.0f s: killed", c.name, SHUTDOWN_S)
+            c.proc.kill()
+            c.proc.wait()
+    return {c.name: c.proc.returncode for c in children}
+
+
+# --- the launch ----------------------------------------------------------------------------------
+
+
+def prepare(opts: LaunchOptions):
+    """World, effective config (robot ids and start poses), run folder."""
+    from sim import load_world, spread_start_poses
+
+    world = load_world(opts.world, seed=opts.seed)
+    cfg = opts.config
+    starts = spread_start_poses(world, opts.robots, cfg.sim.robot.radius_m)
+    port = free_port()
+    cfg = with_overrides(
+        cfg,
+        {
+            "sim": {"world": opts.world, "seed": opts.seed, "speed": opts.speed},
+            "explore": {"strategy": opts.strategy},
+            "comms": {"endpoint": f"tcp/127.0.0.1:{port}"},
+        },
+    )
+    robots = tuple(RobotEntry(f"r{k + 1}", tuple(map(float, p))) for k, p in enumerate(starts))
+    cfg = _with_robots(cfg, robots)
+    out = opts.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "logs").mkdir(exist_ok=True)
+    save_config(cfg, out / "config.toml")
+    return world, cfg, out
+
+
+def _with_robots(cfg: Config, robots: tuple[RobotEntry, ...]) -> Config:
+    import dataclasses
+
+    return dataclasses.replace(cfg, robots=robots)
+
+
+def launch(
+    opts: LaunchOptions,
+    progress: Callable[[Observer, float], None] | None = None,
+    stop: threading.Event | None = None,
+) -> LaunchResult:
+    world, cfg, out = prepare(opts)
+    keys = SwarmKeys(cfg.comms.swarm)
+    ids = [r.id for r in cfg.robots]
+    conf = str(out / "config.toml")
+    logs = out / "logs"
+    stop = stop or threading.Event()
+    children: list[Child] = []
+    obs = Observer(world, cfg, ids)
+    t0 = time.monotonic()
+    error: str | None = None
+    try:
+        children.append(
+            _spawn("coordinator", ["coordinator", "--config", conf], logs, opts.verbose)
+        )
+        sim_args = [
+            "sim",
+            "--serve",
+            "--config",
+            conf,
+            "--world",
+            opts.world,
+            "--seed",
+            str(opts.seed),
+        ]
+        sim_args += ["--speed", str(opts.speed)] + (["--gui"] if opts.gui else [])
+        children.append(_spawn("sim", sim_args, logs, opts.verbose))
+        for rid in ids:
+            children.append(
+                _spawn(rid, ["agent", "--id", rid, "--config", conf], logs, opts.verbose)
+            )
+        with open_session(SessionSpec.client(cfg.comms.endpoint)) as session:
+            bus = Bus(session, "observer")
+            try:
+                bus.subscribe(keys.clock, Clock)
+                bus.subscribe(keys.truth, Truth)
+                bus.subscribe(keys.coordinator_status, CoordinatorStatus)
+                bus.subscribe(keys.merged_delta, MapChunk)
+                bus.subscribe(keys.all_robots("status"), RobotStatus)
+                bus.subscribe(keys.all_robots("pose"), Pose)
+                bus.subscribe(keys.all_robots("map/delta"), MapChunk)
+                error = _watch(bus, keys, obs, opts, children, stop, progress, t0)
+            finally:
+                bus.close()
+    finally:
+        codes = _stop_children(children)
+    wall = time.monotonic() - t0
+    crashed = {k: v for k, v in codes.items() if v not in (0, -signal.SIGTERM, 130)}
+    m = obs.metrics(wall, opts)
+    m["exit_codes"] = codes
+    m["crashed_processes"] = sorted(crashed)
+    m["stopped_because"] = error or "unknown"
+    m["config"] = config_to_dict(cfg)["explore"]
+    _write_outputs(out, obs, m)
+    return LaunchResult(out, m, obs.merged)
+
+
+def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0) -> str:
+    last_progress = 0.0
+    up = False
+    while True:
+        for item in bus.poll(timeout_s=0.05):
+            try:
+                obs.handle(keys, item)
+            except (DecodeError, PolyswarmError) as e:
+                log.warning("observer: %s", e)
+        if obs.need_resync:
+            got = bus.fetch_map(keys.merged_map, timeout_s=2.0)
+            if got is not None:
+                try:
+                    obs.merged = decode_map(got[0])
+                    obs.need_resync = False
+                except DecodeError as e:
+                    log.warning("observer: bad merged map: %s", e)
+        up = up or obs.sim_t > 0
+        obs.sample()
+        now = time.monotonic()
+        if progress is not None and now - last_progress >= 0.5:
+            last_progress = now
+            progress(obs, now - t0)
+        if stop.is_set():
+            return "interrupted"
+        dead = [c.name for c in children if c.proc.poll() is not None]
+        if dead:
+            return f"process exited: {', '.join(dead)}"
+        if obs.mission == MissionState.DONE:
+            return "mission done"
+        if obs.sim_t >= opts.time_limit_s:
+            return "time limit"
+        if now - t0 >= opts.wall_limit_s:
+            return "wall-clock limit"
+        if not up and now - t0 > START_TIMEOUT_S:
+            return "processes did not start"
+        if opts.stop_coverage > 0 and obs.coverage and obs.coverage[-1][1] >= opts.stop_coverage:
+            return f"coverage {opts.stop_coverage:.0%} reached"
+
+
+def _write_outputs(out: Path, obs: Observer, m: dict) -> None:
+    from polyswarm.io.export import export_map
+    from polyswarm.io.tum import write_tum
+    from protocols.files import write_polymap
+
+    m["merged_map_bytes"] = write_polymap(obs.merged, out / "map.polymap")
+    trajs = [np.array(v.truth)[:, 1:3] for v in obs.robots.values() if len(v.truth) > 1]
+    export_map(obs.merged, out / "map.svg", trajectories=trajs)
+    export_map(obs.merged, out / "map.png", trajectories=trajs)
+    tdir = out / "trajectories"
+    tdir.mkdir(exist_ok=True)
+    for rid, v in obs.robots.items():
+        for name, rows in ((rid, v.estimate), (f"{rid}_truth", v.truth)):
+            if rows:
+                a = np.array(rows)
+                write_tum(tdir / f"{name}.tum", a[:, 0], a[:, 1:4])
+    _coverage_plot(out / "coverage.png", obs, m)
+    (out / "metrics.json").write_text(json.dumps(m, indent=2, default=float))
+
+
+def _coverage_plot(path: Path, obs: Observer, m: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    if obs.coverage:
+        t, c = np.array(obs.coverage).T
+        ax.plot(t, 100 * c, color="#1f3fbf")
+    for key, frac in (("t90_s", 90), ("t99_s", 99)):
+        if m.get(key) is not None:
+            ax.axvline(m[key], color="#999999", linestyle="--", linewidth=0.8)
+            ax.text(m[key], 2, f" {frac}%: {m[key]:.0f} s", fontsize=8)
+    ax.set_xlabel("simulated time (s)")
+    ax.set_ylabel("coverage of reachable free space (%)")
+    ax.set_ylim(0, 101)
+    ax.set_title(f"{m['world']}: {m['robots']} robot(s), {m['strategy']}")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -1,0 +1,161 @@
+"""``polyswarm sim --serve``: the simulator on Zenoh.
+
+Steps the pybullet world at ``speed`` simulated seconds per wall second; at every
+lidar tick publishes each robot's odometry and scan (stamped with simulated time), the
+clock, and the ground truth on its own key (for metrics only). Velocity commands are
+applied as they arrive; a robot with no command for ``CMD_TIMEOUT_S`` stops.
+
+Agents acknowledge scans in their commands (``CmdVel.ack``). The simulator never runs
+more than ``max_lag_s`` of simulated time ahead of a live agent's last acknowledged
+scan: on a busy machine the simulation slows down instead of robots driving blind.
+Before the first step it waits until every robot's agent (and the coordinator, when
+asked) holds a liveliness token.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+
+import numpy as np
+
+from agents.session import Bus, SessionSpec, is_alive_change, open_session
+from polyswarm.config import Config
+from protocols.keys import SwarmKeys
+from protocols.messages import Clock, CmdVel, Odometry, Scan, Truth
+from sim import Simulation, World
+
+log = logging.getLogger(__name__)
+
+CMD_TIMEOUT_S = 0.5  # simulated seconds without a command: the robot stops
+STALL_WARN_S = 5.0  # wall seconds waiting for an agent before a warning
+
+
+def serve(
+    cfg: Config,
+    world: World,
+    session_spec: SessionSpec,
+    stop: threading.Event,
+    speed: float | None = None,
+    max_lag_s: float = 0.25,
+    wait_for: tuple[str, ...] = ("agents",),
+    duration_s: float = math.inf,
+    gui: bool = False,
+) -> Simulation:
+    """Run until ``stop`` is set or ``duration_s`` simulated seconds have passed."""
+    speed = cfg.sim.speed if speed is None else speed
+    keys = SwarmKeys(cfg.comms.swarm)
+    ids = [r.id for r in cfg.robots]
+    starts = [tuple(r.start) for r in cfg.robots] if cfg.robots else None
+    n = max(1, len(ids))
+    with Simulation(world, cfg.sim, n, start_poses=starts, gui=gui) as sim:
+        if not ids:
+            ids = [r.name for r in sim.robots]
+        index = {rid: k for k, rid in enumerate(ids)}
+        with open_session(session_spec) as session:
+            bus = Bus(session, "sim")
+            try:
+                bus.subscribe(keys.all_robots("cmd_vel"), CmdVel)
+                bus.watch_alive(keys.all_alive())
+                bus.declare_alive(keys.alive("sim", "sim"))
+                _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s)
+            finally:
+                bus.close()
+        return sim
+
+
+def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s) -> None:
+    alive: set[tuple[str, str]] = set()
+    acked = dict.fromkeys(ids, -1)  # last scan seq each agent has acknowledged
+    sent: dict[str, list[tuple[int, float]]] = {rid: [] for rid in ids}  # (seq, t) unacked
+    last_cmd_t = dict.fromkeys(ids, -math.inf)
+
+    def drain(timeout: float = 0.0) -> None:
+        for item in bus.poll(timeout_s=timeout):
+            change = is_alive_change(item)
+            if change is not None:
+                who = keys.alive_name(item.key)
+                if who is not None:
+                    (alive.add if change else alive.discard)(who)
+                continue
+            rid = keys.robot_of(item.key)
+            if rid not in index:
+                continue
+            msg: CmdVel = item.msg
+            sim.set_cmd(index[rid], msg.v_mps, msg.w_radps)
+            last_cmd_t[rid] = sim.time
+            if msg.ack > acked[rid]:
+                acked[rid] = msg.ack
+                sent[rid] = [(s, t) for s, t in sent[rid] if s > msg.ack]
+
+    # wait for the processes that must be up before time starts
+    need = set()
+    if "agents" in wait_for:
+        need |= {("agent", rid) for rid in ids}
+    if "coordinator" in wait_for:
+        need.add(("coordinator", "coordinator"))
+    t_wait = time.monotonic()
+    while not stop.is_set() and not need <= alive:
+        drain(0.1)
+        if time.monotonic() - t_wait > STALL_WARN_S:
+            log.warning("waiting for %s", sorted(n for _, n in need - alive))
+            t_wait = time.monotonic()
+    log.info("simulation starts: %d robots, speed %.1fx", len(ids), speed)
+    wall0, sim0 = time.monotonic(), sim.time
+    last_clock = (time.monotonic(), sim.time)
+    stall_t = None
+    while not stop.is_set() and sim.time < duration_s:
+        drain()
+        # keep pace with the slowest live agent
+        lagging = [
+            rid
+            for rid in ids
+            if ("agent", rid) in alive and sent[rid] and sim.time - sent[rid][0][1] > max_lag_s
+        ]
+        if lagging:
+            stall_t = stall_t or time.monotonic()
+            if time.monotonic() - stall_t > STALL_WARN_S:
+                log.warning("agents %s are behind; waiting", lagging)
+                stall_t = time.monotonic()
+            drain(0.005)
+            wall0, sim0 = time.monotonic(), sim.time  # do not rush to catch up afterwards
+            continue
+        stall_t = None
+        # real-time pacing at the requested speed
+        if speed > 0:
+            ahead = (sim.time - sim0) / speed - (time.monotonic() - wall0)
+            if ahead > 0:
+                drain(min(ahead, 0.05))
+                continue
+        for rid in ids:  # a robot whose agent went quiet stops
+            if sim.time - last_cmd_t[rid] > CMD_TIMEOUT_S:
+                sim.set_cmd(index[rid], 0.0, 0.0)
+        events = sim.step()
+        if not events:
+            continue
+        t = sim.time
+        for ev in events:
+            rid = ids[ev.robot]
+            r = sim.robots[ev.robot]
+            o = ev.odom
+            bus.publish(
+                keys.robot(rid).odom, Odometry(float(o[0]), float(o[1]), float(o[2]), r.v, r.w), t
+            )
+            s = ev.scan
+            bus.publish(
+                keys.robot(rid).scan,
+                Scan(s.angle_min, s.angle_increment, s.range_min, s.range_max, s.ranges),
+                t,
+            )
+            if ("agent", rid) in alive:
+                sent[rid].append((bus.last_seq(keys.robot(rid).scan), t))
+        poses = {rid: tuple(float(v) for v in sim.robots[k].pose) for rid, k in index.items()}
+        walls = sum(r.wall_collisions for r in sim.robots)
+        robots = sum(r.robot_collisions for r in sim.robots)
+        bus.publish(keys.truth, Truth(poses, walls, robots), t)
+        now = time.monotonic()
+        achieved = (t - last_clock[1]) / max(now - last_clock[0], 1e-9)
+        last_clock = (now, t) if now - last_clock[0] > 1.0 else last_clock
+        bus.publish(keys.clock, Clock(t, float(np.clip(achieved, 0, 1e6))), t)

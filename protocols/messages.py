@@ -1,0 +1,614 @@
+"""Messages between polyswarm processes (PROTOCOL.md section 5.2).
+
+Every message is a msgpack map with the envelope ``t`` (type), ``v`` (protocol
+version), ``src`` (sender name), ``seq`` (per-sender, per-key sequence number) and
+``ts`` (timestamp, seconds: simulated time in a simulation), plus the fields of its
+type. Decoding untrusted bytes raises ``ProtocolError`` and nothing else.
+
+    data = encode(Odometry(x=1.0, y=2.0, theta=0.1), sender="sim", seq=7, stamp_s=3.2)
+    env, msg = decode(data)          # Envelope(type="odom", ...), Odometry(...)
+    decode(data, expect=Odometry)    # ProtocolError unless it is an Odometry
+
+Maps and deltas (``protocols.mapcodec``) travel as ``MapChunk`` messages: a payload
+larger than ``CHUNK_BYTES`` is cut into parts and reassembled by ``Reassembler``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from enum import StrEnum
+from typing import Any, ClassVar
+
+import msgpack
+import numpy as np
+
+from polyswarm.errors import DecodeError
+from protocols.keys import NAME_RE
+
+PROTOCOL_VERSION = 1
+CHUNK_BYTES = 32 * 1024  # map payload per message: well under Zenoh's 64 KB batches
+MAX_MESSAGE_BYTES = CHUNK_BYTES + 4096  # anything larger is refused before parsing
+MAX_MAP_BYTES = 64 * 1024 * 1024  # a reassembled map larger than this is refused
+MAX_BEAMS = 100_000
+MAX_TEXT = 256  # characters of a free-text field
+
+
+class ProtocolError(DecodeError):
+    """A message from the network is malformed (refused whole; nothing is applied)."""
+
+
+class RobotState(StrEnum):
+    IDLE = "idle"  # no assignment
+    NAVIGATING = "navigating"
+    REACHED = "reached"
+    UNREACHABLE = "unreachable"  # no path on the map
+    STUCK = "stuck"  # a path, but no progress along it
+    HOME = "home"  # back at the start after the mission
+
+
+class AssignmentKind(StrEnum):
+    EXPLORE = "explore"  # go to a frontier target
+    HOME = "home"  # mission over: return to the start pose
+    STOP = "stop"  # stand still
+
+
+class MissionState(StrEnum):
+    STARTING = "starting"
+    EXPLORING = "exploring"
+    RETURNING = "returning"
+    DONE = "done"
+
+
+class MapKind(StrEnum):
+    DELTA = "delta"  # a polymap-delta (PROTOCOL.md 3.3)
+    MAP = "map"  # a full polymap (3.2), the reply of a map queryable
+
+
+# --- field checks ------------------------------------------------------------------------
+
+
+def _num(v: Any, name: str, lo: float = -1e9, hi: float = 1e9) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ProtocolError(f"field {name!r}: expected a number")
+    v = float(v)
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise ProtocolError(f"field {name!r}: {v} is not within [{lo}, {hi}]")
+    return v
+
+
+def _int(v: Any, name: str, lo: int = -(2**62), hi: int = 2**62) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
+        raise ProtocolError(f"field {name!r}: expected an integer in [{lo}, {hi}]")
+    return v
+
+
+def _str(v: Any, name: str, choices: type[StrEnum] | None = None) -> str:
+    if not isinstance(v, str) or len(v) > MAX_TEXT:
+        raise ProtocolError(f"field {name!r}: expected a string of at most {MAX_TEXT} chars")
+    if choices is not None:
+        try:
+            return choices(v)
+        except ValueError:
+            raise ProtocolError(f"field {name!r}: {v!r} is not one of {list(choices)}") from None
+    return v
+
+
+def _bytes(v: Any, name: str, max_len: int) -> bytes:
+    if not isinstance(v, bytes) or len(v) > max_len:
+        raise ProtocolError(f"field {name!r}: expected at most {max_len} bytes")
+    return v
+
+
+def _xy(v: Any, name: str) -> tuple[float, float]:
+    if not isinstance(v, list | tuple) or len(v) != 2:
+        raise ProtocolError(f"field {name!r}: expected [x, y]")
+    return (_num(v[0], name), _num(v[1], name))
+
+
+def _points(v: Any, name: str, max_n: int = 4096) -> tuple[tuple[float, float], ...]:
+    if not isinstance(v, list | tuple) or len(v) > max_n:
+        raise ProtocolError(f"field {name!r}: expected a list of at most {max_n} points")
+    return tuple(_xy(p, name) for p in v)
+
+
+# --- messages ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Envelope:
+    type: str
+    version: int
+    sender: str
+    seq: int
+    stamp_s: float
+
+
+class Message:
+    """Base of the message types: ``TYPE`` names it on the wire."""
+
+    TYPE: ClassVar[str]
+
+    def body(self) -> dict:
+        raise NotImplementedError
+
+    @classmethod
+    def from_body(cls, b: dict) -> Message:
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Scan(Message):
+    """A 2D lidar scan (sensor frame, beams counter-clockwise from ``angle_min_rad``).
+
+    Ranges are float32 metres; +inf means no return, NaN an invalid beam."""
+
+    TYPE: ClassVar[str] = "scan"
+    angle_min_rad: float
+    angle_increment_rad: float
+    range_min_m: float
+    range_max_m: float
+    ranges_m: np.ndarray = field(repr=False)
+
+    def body(self) -> dict:
+        return {
+            "a0": self.angle_min_rad,
+            "da": self.angle_increment_rad,
+            "rmin": self.range_min_m,
+            "rmax": self.range_max_m,
+            "r": np.asarray(self.ranges_m, dtype="<f4").tobytes(),
+        }
+
+    @classmethod
+    def from_body(cls, b: dict) -> Scan:
+        raw = _bytes(b.get("r"), "r", 4 * MAX_BEAMS)
+        if len(raw) % 4 or len(raw) < 8:
+            raise ProtocolError("field 'r': expected at least 2 float32 ranges")
+        ranges = np.frombuffer(raw, dtype="<f4").astype(float)
+        rmin = _num(b.get("rmin"), "rmin", 0.0, 1e4)
+        rmax = _num(b.get("rmax"), "rmax", 0.0, 1e4)
+        if rmax <= rmin:
+            raise ProtocolError("range_max must exceed range_min")
+        if (ranges[np.isfinite(ranges)] < 0).any():
+            raise ProtocolError("negative range")
+        return cls(
+            _num(b.get("a0"), "a0", -2 * math.pi, 2 * math.pi),
+            _num(b.get("da"), "da", -math.pi, math.pi),
+            rmin,
+            rmax,
+            ranges,
+        )
+
+
+@dataclass(frozen=True)
+class Odometry(Message):
+    """Wheel odometry pose (odometry frame) and velocity."""
+
+    TYPE: ClassVar[str] = "odom"
+    x: float
+    y: float
+    theta: float
+    v_mps: float = 0.0
+    w_radps: float = 0.0
+
+    def body(self) -> dict:
+        return {"x": self.x, "y": self.y, "th": self.theta, "lin": self.v_mps, "ang": self.w_radps}
+
+    @classmethod
+    def from_body(cls, b: dict) -> Odometry:
+        return cls(
+            _num(b.get("x"), "x"),
+            _num(b.get("y"), "y"),
+            _num(b.get("th"), "th", -1e3, 1e3),
+            _num(b.get("lin", 0.0), "lin", -100, 100),
+            _num(b.get("ang", 0.0), "ang", -100, 100),
+        )
+
+
+@dataclass(frozen=True)
+class CmdVel(Message):
+    """Velocity command; ``ack`` is the sequence number of the last scan the agent
+    processed (-1: none), so a simulator can keep pace with slow agents."""
+
+    TYPE: ClassVar[str] = "cmd_vel"
+    v_mps: float
+    w_radps: float
+    ack: int = -1
+
+    def body(self) -> dict:
+        return {"lin": self.v_mps, "ang": self.w_radps, "ack": self.ack}
+
+    @classmethod
+    def from_body(cls, b: dict) -> CmdVel:
+        return cls(
+            _num(b.get("lin"), "lin", -100, 100),
+            _num(b.get("ang"), "ang", -100, 100),
+            _int(b.get("ack", -1), "ack", -1),
+        )
+
+
+@dataclass(frozen=True)
+class Pose(Message):
+    """A robot's SLAM pose estimate in the swarm's map frame."""
+
+    TYPE: ClassVar[str] = "pose"
+    x: float
+    y: float
+    theta: float
+    map_version: int = 0
+    blocked_by: str = ""  # a robot standing in this one's way (it should give way)
+
+    def body(self) -> dict:
+        out = {"x": self.x, "y": self.y, "th": self.theta, "ver": self.map_version}
+        if self.blocked_by:
+            out["wait"] = self.blocked_by
+        return out
+
+    @classmethod
+    def from_body(cls, b: dict) -> Pose:
+        wait = _str(b.get("wait", ""), "wait")
+        if wait and not NAME_RE.match(wait):
+            raise ProtocolError(f"field 'wait': bad robot name {wait!r}")
+        return cls(
+            _num(b.get("x"), "x"),
+            _num(b.get("y"), "y"),
+            _num(b.get("th"), "th", -1e3, 1e3),
+            _int(b.get("ver", 0), "ver", 0),
+            wait,
+        )
+
+
+@dataclass(frozen=True)
+class RobotStatus(Message):
+    TYPE: ClassVar[str] = "robot-status"
+    state: RobotState
+    target: int = -1  # the assignment's target id being worked on
+    detail: str = ""
+    keyframes: int = 0
+    map_version: int = 0
+    bytes_sent: int = 0  # map deltas, map replies, poses and status so far
+    distance_m: float = 0.0  # travelled, by odometry
+
+    def body(self) -> dict:
+        return {
+            "state": str(self.state),
+            "target": self.target,
+            "detail": self.detail,
+            "kf": self.keyframes,
+            "ver": self.map_version,
+            "bytes": self.bytes_sent,
+            "dist": self.distance_m,
+        }
+
+    @classmethod
+    def from_body(cls, b: dict) -> RobotStatus:
+        return cls(
+            _str(b.get("state"), "state", RobotState),
+            _int(b.get("target", -1), "target", -1),
+            _str(b.get("detail", ""), "detail"),
+            _int(b.get("kf", 0), "kf", 0),
+            _int(b.get("ver", 0), "ver", 0),
+            _int(b.get("bytes", 0), "bytes", 0),
+            _num(b.get("dist", 0.0), "dist", 0.0),
+        )
+
+
+@dataclass(frozen=True)
+class Assignment(Message):
+    """The coordinator's order to one robot: a goal point in explored free space (and,
+    for a frontier, the frontier polyline it looks at)."""
+
+    TYPE: ClassVar[str] = "assignment"
+    kind: AssignmentKind
+    target: int  # target id, unique within a mission (-1 for stop)
+    goal: tuple[float, float] = (0.0, 0.0)
+    frontier: tuple[tuple[float, float], ...] = ()
+    cost_m: float = 0.0  # planned path length the coordinator expects
+    map_version: int = 0  # merged map version the assignment was made on
+
+    def body(self) -> dict:
+        return {
+            "kind": str(self.kind),
+            "target": self.target,
+            "goal": list(self.goal),
+            "frontier": [list(p) for p in self.frontier],
+            "cost": self.cost_m,
+            "ver": self.map_version,
+        }
+
+    @classmethod
+    def from_body(cls, b: dict) -> Assignment:
+        return cls(
+            _str(b.get("kind"), "kind", AssignmentKind),
+            _int(b.get("target"), "target", -1),
+            _xy(b.get("goal", (0.0, 0.0)), "goal"),
+            _points(b.get("frontier", ()), "frontier"),
+            _num(b.get("cost", 0.0), "cost", 0.0),
+            _int(b.get("ver", 0), "ver", 0),
+        )
+
+
+@dataclass(frozen=True)
+class CoordinatorStatus(Message):
+    TYPE: ClassVar[str] = "coordinator-status"
+    state: MissionState
+    robots: tuple[str, ...] = ()
+    frontiers: int = 0
+    map_version: int = 0
+    explored_m2: float = 0.0
+    cycle_ms: float = 0.0
+    bytes_sent: int = 0
+
+    def body(self) -> dict:
+        return {
+            "state": str(self.state),
+            "robots": list(self.robots),
+            "frontiers": self.frontiers,
+            "ver": self.map_version,
+            "area": self.explored_m2,
+            "cycle_ms": self.cycle_ms,
+            "bytes": self.bytes_sent,
+        }
+
+    @classmethod
+    def from_body(cls, b: dict) -> CoordinatorStatus:
+        robots = b.get("robots", [])
+        if not isinstance(robots, list) or len(robots) > 1000:
+            raise ProtocolError("field 'robots': expected a list of names")
+        for r in robots:
+            if not isinstance(r, str) or not NAME_RE.match(r):
+                raise ProtocolError(f"field 'robots': bad robot name {r!r}")
+        return cls(
+            _str(b.get("state"), "state", MissionState),
+            tuple(robots),
+            _int(b.get("frontiers", 0), "frontiers", 0),
+            _int(b.get("ver", 0), "ver", 0),
+            _num(b.get("area", 0.0), "area", 0.0),
+            _num(b.get("cycle_ms", 0.0), "cycle_ms", 0.0),
+            _int(b.get("bytes", 0), "bytes", 0),
+        )
+
+
+@dataclass(frozen=True)
+class Clock(Message):
+    """Simulation time; ``speed`` is the achieved simulated seconds per wall second."""
+
+    TYPE: ClassVar[str] = "clock"
+    t_s: float
+    speed: float = 0.0
+
+    def body(self) -> dict:
+        return {"time": self.t_s, "speed": self.speed}
+
+    @classmethod
+    def from_body(cls, b: dict) -> Clock:
+        return cls(_num(b.get("time"), "time", 0.0), _num(b.get("speed", 0.0), "speed", 0.0))
+
+
+@dataclass(frozen=True)
+class Truth(Message):
+    """Ground-truth poses of every simulated robot (metrics only) and collision counts."""
+
+    TYPE: ClassVar[str] = "truth"
+    poses: dict[str, tuple[float, float, float]]
+    wall_collisions: int = 0
+    robot_collisions: int = 0
+
+    def body(self) -> dict:
+        return {
+            "poses": {k: list(v) for k, v in self.poses.items()},
+            "walls": self.wall_collisions,
+            "robots": self.robot_collisions,
+        }
+
+    @classmethod
+    def from_body(cls, b: dict) -> Truth:
+        poses = b.get("poses")
+        if not isinstance(poses, dict) or len(poses) > 1000:
+            raise ProtocolError("field 'poses': expected a map of robot poses")
+        out = {}
+        for k, v in poses.items():
+            if not isinstance(k, str) or not NAME_RE.match(k):
+                raise ProtocolError(f"field 'poses': bad robot name {k!r}")
+            if not isinstance(v, list) or len(v) != 3:
+                raise ProtocolError("field 'poses': expected [x, y, theta]")
+            out[k] = (_num(v[0], "x"), _num(v[1], "y"), _num(v[2], "th", -1e3, 1e3))
+        return cls(out, _int(b.get("walls", 0), "walls", 0), _int(b.get("robots", 0), "robots", 0))
+
+
+@dataclass(frozen=True)
+class MapChunk(Message):
+    """Part ``part`` of ``parts`` of an encoded map or delta of ``total`` bytes.
+
+    ``base``/``ver``: the delta applies to map version ``base`` and gives ``ver`` (a full
+    map has base -1). ``stream`` is the sender's number for the payload, shared by its
+    parts."""
+
+    TYPE: ClassVar[str] = "map-chunk"
+    kind: MapKind
+    base: int
+    ver: int
+    stream: int  # identifies the payload among the sender's chunks
+    part: int
+    parts: int
+    total: int
+    data: bytes = field(repr=False)
+
+    def body(self) -> dict:
+        return {
+            "kind": str(self.kind),
+            "base": self.base,
+            "ver": self.ver,
+            "stream": self.stream,
+            "part": self.part,
+            "parts": self.parts,
+            "total": self.total,
+            "data": self.data,
+        }
+
+    @classmethod
+    def from_body(cls, b: dict) -> MapChunk:
+        ver = _int(b.get("ver"), "ver", 0)
+        parts = _int(b.get("parts"), "parts", 1, MAX_MAP_BYTES // CHUNK_BYTES + 1)
+        total = _int(b.get("total"), "total", 0, MAX_MAP_BYTES)
+        data = _bytes(b.get("data"), "data", CHUNK_BYTES)
+        part = _int(b.get("part"), "part", 0, parts - 1)
+        if total > parts * CHUNK_BYTES:
+            raise ProtocolError("total larger than its parts can hold")
+        return cls(
+            _str(b.get("kind"), "kind", MapKind),
+            _int(b.get("base"), "base", -1, ver),
+            ver,
+            _int(b.get("stream"), "stream", 0),
+            part,
+            parts,
+            total,
+            data,
+        )
+
+
+TYPES: dict[str, type[Message]] = {
+    m.TYPE: m
+    for m in (
+        Scan,
+        Odometry,
+        CmdVel,
+        Pose,
+        RobotStatus,
+        Assignment,
+        CoordinatorStatus,
+        Clock,
+        Truth,
+        MapChunk,
+    )
+}
+
+
+# --- encoding ----------------------------------------------------------------------------
+
+
+ENVELOPE_KEYS = frozenset({"t", "v", "src", "seq", "ts"})
+
+
+def encode(msg: Message, sender: str, seq: int, stamp_s: float) -> bytes:
+    out = {"t": msg.TYPE, "v": PROTOCOL_VERSION, "src": sender, "seq": seq, "ts": stamp_s}
+    body = msg.body()
+    if ENVELOPE_KEYS & body.keys():  # pragma: no cover - a programming error
+        raise ValueError(f"{msg.TYPE} body reuses envelope keys {ENVELOPE_KEYS & body.keys()}")
+    out.update(body)
+    return msgpack.packb(out, use_bin_type=True)
+
+
+def decode(data: bytes, expect: type[Message] | None = None) -> tuple[Envelope, Message]:
+    """Envelope and message of untrusted bytes; ``ProtocolError`` on any defect."""
+    if not isinstance(data, bytes | bytearray | memoryview) or len(data) > MAX_MESSAGE_BYTES:
+        raise ProtocolError(f"message larger than {MAX_MESSAGE_BYTES} bytes or not bytes")
+    try:
+        obj = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True)
+    except Exception as e:  # msgpack raises several types for malformed input
+        raise ProtocolError(f"not msgpack: {e}") from None
+    if not isinstance(obj, dict):
+        raise ProtocolError("not a msgpack map")
+    kind = obj.get("t")
+    cls = TYPES.get(kind) if isinstance(kind, str) else None
+    if cls is None:
+        raise ProtocolError(f"unknown message type {kind!r}")
+    if expect is not None and cls is not expect:
+        raise ProtocolError(f"expected a {expect.TYPE!r} message, got {kind!r}")
+    if obj.get("v") != PROTOCOL_VERSION:
+        raise ProtocolError(f"protocol version {obj.get('v')!r}, expected {PROTOCOL_VERSION}")
+    src = obj.get("src")
+    if not isinstance(src, str) or not NAME_RE.match(src):
+        raise ProtocolError(f"bad sender {src!r}")
+    seq, stamp = _int(obj.get("seq"), "seq", 0), _num(obj.get("ts"), "ts", 0.0, 1e12)
+    env = Envelope(kind, PROTOCOL_VERSION, src, seq, stamp)
+    try:
+        msg = cls.from_body(obj)
+    except ProtocolError:
+        raise
+    except (TypeError, ValueError, KeyError, OverflowError) as e:  # belt and braces
+        raise ProtocolError(f"malformed {kind!r}: {e}") from None
+    return env, msg
+
+
+def message_fields(cls: type[Message]) -> list[str]:
+    return [f.name for f in fields(cls)]
+
+
+# --- chunking ----------------------------------------------------------------------------
+
+
+def chunk_payload(
+    kind: MapKind, payload: bytes, base: int, ver: int, stream: int
+) -> list[MapChunk]:
+    """Cut an encoded map or delta into chunks of at most ``CHUNK_BYTES``."""
+    if len(payload) > MAX_MAP_BYTES:
+        raise ProtocolError(f"map payload of {len(payload)} bytes exceeds {MAX_MAP_BYTES}")
+    parts = max(1, -(-len(payload) // CHUNK_BYTES))
+    return [
+        MapChunk(
+            kind,
+            base,
+            ver,
+            stream,
+            k,
+            parts,
+            len(payload),
+            payload[k * CHUNK_BYTES : (k + 1) * CHUNK_BYTES],
+        )
+        for k in range(parts)
+    ]
+
+
+@dataclass
+class _Partial:
+    first: MapChunk
+    parts: dict[int, bytes]
+    started_s: float
+
+
+class Reassembler:
+    """Collects map chunks per (sender, stream) into whole payloads.
+
+    Incomplete payloads are dropped after ``timeout_s`` (of the caller's clock) and at
+    most ``max_pending`` are kept; chunks that disagree with their stream's first chunk
+    are refused. ``add`` returns the first chunk and the whole payload once complete."""
+
+    def __init__(self, timeout_s: float = 10.0, max_pending: int = 16) -> None:
+        self.timeout_s = timeout_s
+        self.max_pending = max_pending
+        self._pending: dict[tuple[str, int], _Partial] = {}
+
+    def add(self, sender: str, chunk: MapChunk, now_s: float) -> tuple[MapChunk, bytes] | None:
+        for key in [k for k, p in self._pending.items() if now_s - p.started_s > self.timeout_s]:
+            del self._pending[key]
+        if chunk.parts == 1:
+            if len(chunk.data) != chunk.total:
+                raise ProtocolError("single chunk does not hold its total")
+            return chunk, chunk.data
+        key = (sender, chunk.stream)
+        p = self._pending.get(key)
+        if p is None:
+            if len(self._pending) >= self.max_pending:
+                oldest = min(self._pending, key=lambda k: self._pending[k].started_s)
+                del self._pending[oldest]
+            p = self._pending[key] = _Partial(chunk, {}, now_s)
+        f = p.first
+        if (chunk.kind, chunk.base, chunk.ver, chunk.parts, chunk.total) != (
+            f.kind,
+            f.base,
+            f.ver,
+            f.parts,
+            f.total,
+        ):
+            del self._pending[key]
+            raise ProtocolError("chunk disagrees with the rest of its stream")
+        expected = min(CHUNK_BYTES, chunk.total - chunk.part * CHUNK_BYTES)
+        if len(chunk.data) != expected:
+            del self._pending[key]
+            raise ProtocolError(f"chunk {chunk.part} holds {len(chunk.data)} bytes, not {expected}")
+        p.parts[chunk.part] = chunk.data
+        if len(p.parts) < chunk.parts:
+            return None
+        del self._pending[key]
+        return f, b"".join(p.parts[k] for k in range(chunk.parts))
