@@ -51,6 +51,7 @@ MATCH_M = 1.0  # a target within this of last cycle's keeps its id
 RESEND_S = 5.0  # assignments are repeated this often (a lost message heals)
 PROGRESS_M = 0.5  # progress towards a target: its path cost shrank by this much
 EXCLUDE_S = 30.0  # a robot that failed a target is not sent there again for this long
+RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
 
 
@@ -68,6 +69,8 @@ class RobotInfo:
     progress_t: float = 0.0
     excluded: dict[int, float] = field(default_factory=dict)  # target id -> until
     reached_t: float | None = None  # when the robot reported its target reached
+    behind_since: float | None = None  # the robot's map version is ahead of ours since
+    announced: int = 0  # the robot's map version, as its poses tell
 
 
 @dataclass
@@ -118,7 +121,25 @@ class Coordinator:
 
     def on_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
         self.now = max(self.now, stamp_s)
-        self.robot(rid).pose = np.array([pose.x, pose.y, pose.theta])
+        info = self.robot(rid)
+        info.pose = np.array([pose.x, pose.y, pose.theta])
+        info.announced = max(info.announced, pose.map_version)
+        self._check_behind(info)
+
+    def _check_behind(self, info: RobotInfo) -> None:
+        have = 0 if info.map is None else info.map.version
+        if info.announced > have:  # a delta is late or lost
+            info.behind_since = info.behind_since if info.behind_since is not None else self.now
+        else:
+            info.behind_since = None
+
+    def needs_resync(self) -> list[str]:
+        """Robots whose map the coordinator has been behind for ``RESYNC_AFTER_S``."""
+        return [
+            r.id
+            for r in self.robots.values()
+            if r.behind_since is not None and self.now - r.behind_since >= RESYNC_AFTER_S
+        ]
 
     def on_status(self, rid: str, stamp_s: float, status: RobotStatus) -> None:
         self.now = max(self.now, stamp_s)
@@ -149,11 +170,16 @@ class Coordinator:
                 raise _gap(rid, delta)
             info.map = GridPolyMap(delta.cell_size)
         info.map = info.map.apply_delta(delta)
+        self._check_behind(info)
         return self._merge(delta.cells)
 
     def on_robot_map(self, rid: str, pmap: GridPolyMap) -> MapDelta | None:
         """A robot's full map (resync): nothing it mapped is lost."""
-        self.robot(rid).map = pmap
+        info = self.robot(rid)
+        if info.map is not None and info.map.version >= pmap.version:
+            return None
+        info.map = pmap
+        self._check_behind(info)
         return self._merge(list(pmap.cells.values()))
 
     def _merge(self, cells) -> MapDelta | None:
@@ -415,8 +441,11 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
                         log.warning("%s: %s", item.key, e)
+                resync.update(coord.needs_resync())
                 for rid in list(resync):
+                    log.info("fetching the full map of %s", rid)
                     got = bus.fetch_map(keys.robot(rid).map, timeout_s=2.0)
+                    coord.robot(rid).behind_since = coord.now  # next try after a pause
                     if got is None:
                         continue
                     try:

@@ -39,6 +39,7 @@ from protocols.messages import (
     Assignment,
     AssignmentKind,
     CmdVel,
+    CoordinatorStatus,
     MapChunk,
     MapKind,
     Odometry,
@@ -443,11 +444,13 @@ def run_agent(
             bus.subscribe(me.scan, Scan)
             bus.subscribe(keys.assignment(robot_id), Assignment)
             bus.subscribe(keys.merged_delta, MapChunk)
+            bus.subscribe(keys.coordinator_status, CoordinatorStatus)
             bus.serve_map(me.map, lambda: (encode_map(agent.slam.map), agent.slam.map.version))
             bus.declare_alive(keys.alive("agent", robot_id))
             bus.watch_alive(keys.all_alive("coordinator"))
             log.info("agent %s up (start pose %s)", robot_id, tuple(agent.start_pose))
             need_merged = False
+            behind_since = None  # the merged map we hold is older than the coordinator's
             while not stop.is_set() and time.monotonic() < t_end:
                 for item in bus.poll(timeout_s=0.05):
                     alive = is_alive_change(item)
@@ -472,6 +475,12 @@ def run_agent(
                                 agent.on_merged_delta(decode_delta(item.payload))
                             except MapError:  # a gap (or no map yet): resync
                                 need_merged = True
+                        elif isinstance(msg, CoordinatorStatus):
+                            have = -1 if agent.merged is None else agent.merged.version
+                            behind = msg.map_version > have
+                            behind_since = (behind_since or time.monotonic()) if behind else None
+                            if behind_since and time.monotonic() - behind_since > 1.0:
+                                need_merged, behind_since = True, None
                     except DecodeError as e:
                         log.warning("%s: rejected %s: %s", robot_id, item.key, e)
                     except PolyswarmError as e:

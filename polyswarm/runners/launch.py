@@ -110,6 +110,7 @@ class Observer:
         self._cell_cover: dict = {}  # cell index -> (cell version, covered m2)
         self._truth_cells: dict = {}
         self.need_resync = False
+        self._behind: float | None = None
 
     # coverage = explored space inside the reachable free space, over its area
     def covered_area(self) -> float:
@@ -162,6 +163,12 @@ class Observer:
             self.coordinator = msg
             self.mission = msg.state
             self.cycle_ms.append(msg.cycle_ms)
+            if msg.map_version > self.merged.version:  # a late or lost delta
+                self._behind = self._behind if self._behind is not None else time.monotonic()
+                if time.monotonic() - self._behind > 1.0:
+                    self.need_resync, self._behind = True, None
+            else:
+                self._behind = None
         elif rid in self.robots:
             view = self.robots[rid]
             if isinstance(msg, RobotStatus):
