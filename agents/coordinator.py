@@ -13,7 +13,10 @@ a robot reached or failed its target, joined or left):
      whose frontier is still there is blacklisted at once (it cannot be resolved);
   5. mission end: no reachable target for ``end_confirm_s`` -> robots return to their
      start poses -> done.
-Robot map deltas are merged as they arrive (a gap fetches that robot's full map).
+Robot map deltas are applied to that robot's copy of its map as they arrive (a gap
+fetches the robot's full map); the changed cells of all robots are merged into the
+global map in one batch (``flush``) every ``MERGE_PERIOD_S`` and before each cycle, so
+the navigation graph is updated once per batch and the merged map goes out as one delta.
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ PROGRESS_M = 0.5  # progress towards a target: its path cost shrank by this much
 EXCLUDE_S = 30.0  # a robot that failed a target is not sent there again for this long
 RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
+MERGE_PERIOD_S = 0.5  # robots' changed cells are merged at least this often (batched)
 
 
 @dataclass
@@ -97,6 +101,8 @@ class Coordinator:
         self._last_cycle = -math.inf
         self._wake = True
         self._pending_ms = 0.0  # merge time since the last cycle (counts into the cycle)
+        self._pending: dict[str, set] = {}  # robot -> its cells changed since the last merge
+        self._last_flush = -math.inf
         self.cycle_ms: list[float] = []
         self.now = 0.0
         self.bytes_sent = 0
@@ -159,8 +165,9 @@ class Coordinator:
             info.reached_t = self.now
         self._wake = True
 
-    def on_robot_delta(self, rid: str, stamp_s: float, delta: MapDelta) -> MapDelta | None:
-        """Apply a robot's delta to its map and the merged map; the merged delta.
+    def on_robot_delta(self, rid: str, stamp_s: float, delta: MapDelta) -> None:
+        """Apply a robot's delta to its copy of the robot's map; its cells are merged at
+        the next ``flush``.
 
         Raises DeltaGapError when the robot's delta does not apply (fetch its map)."""
         self.now = max(self.now, stamp_s)
@@ -171,29 +178,55 @@ class Coordinator:
             info.map = GridPolyMap(delta.cell_size)
         info.map = info.map.apply_delta(delta)
         self._check_behind(info)
-        return self._merge(delta.cells)
+        self._pending.setdefault(rid, set()).update(c.index for c in delta.cells)
 
-    def on_robot_map(self, rid: str, pmap: GridPolyMap) -> MapDelta | None:
+    def on_robot_map(self, rid: str, pmap: GridPolyMap) -> None:
         """A robot's full map (resync): nothing it mapped is lost."""
         info = self.robot(rid)
         if info.map is not None and info.map.version >= pmap.version:
-            return None
+            return
         info.map = pmap
         self._check_behind(info)
-        return self._merge(list(pmap.cells.values()))
+        self._pending.setdefault(rid, set()).update(pmap.cells)
 
-    def _merge(self, cells) -> MapDelta | None:
+    def flush_due(self) -> bool:
+        return bool(self._pending) and self.now - self._last_flush >= MERGE_PERIOD_S
+
+    def flush(self) -> MapDelta | None:
+        """Merge the robots' cells changed since the last flush; the merged map's delta.
+
+        A cell that fails to merge is logged and stays in its robot's map; the robot's
+        next change of it, or a resync, retries it."""
+        self._last_flush = self.now
+        if not self._pending:
+            return None
         t0 = time.perf_counter()
         base = self.merged.version
-        res = self.merged.merge_cells(cells)
-        self.merged = res.map
-        if self.merged.version == base:
-            self._pending_ms += (time.perf_counter() - t0) * 1e3
-            return None
-        delta = self.merged.delta_since(base)
-        self.graph.update(self.merged, {c.index for c in delta.cells})
+        queue = []
+        for rid, idxs in sorted(self._pending.items()):
+            m = self.robots[rid].map
+            queue += [m.cells[i] for i in sorted(idxs) if m is not None and i in m.cells]
+        self._pending.clear()
+        self._merge_batch(queue)
+        delta = None
+        if self.merged.version != base:
+            delta = self.merged.delta_since(base)
+            self.graph.update(self.merged, {c.index for c in delta.cells})
         self._pending_ms += (time.perf_counter() - t0) * 1e3
         return delta
+
+    def _merge_batch(self, cells: list) -> None:
+        try:
+            self.merged = self.merged.merge_cells(cells).map
+            return
+        except PolyswarmError as e:
+            if len(cells) == 1:
+                log.error(
+                    "cell %s could not be merged (kept in the robot's map): %s", cells[0].index, e
+                )
+                return
+        for c in cells:  # find the bad cell; merge the others
+            self._merge_batch([c])  # (a rare path: GEOS failed on this batch)
 
     # -- the cycle -------------------------------------------------------------------------
 
@@ -201,8 +234,8 @@ class Coordinator:
         return self._wake or self.now - self._last_cycle >= self.cfg.explore.cycle_period_s
 
     def cycle(self) -> Outgoing:
+        out = Outgoing(merged_delta=self.flush())
         t0 = time.perf_counter()
-        out = Outgoing()
         self._last_cycle = self.now
         self._wake = False
         live = [r for r in self.robots.values() if r.alive and r.pose is not None]
@@ -273,17 +306,21 @@ class Coordinator:
             reach=reach,
         )
         # keep ids: a target near last cycle's is the same target
-        old = list(self.targets.items())
+        old_ids = list(self.targets)
+        old_goals = np.array([o.goal for o in self.targets.values()]).reshape(-1, 2)
+        old_mids = np.array([o.midpoint for o in self.targets.values()]).reshape(-1, 2)
+        taken = np.zeros(len(old_ids), dtype=bool)
         new: dict[int, Target] = {}
         for t in found:
             tid = None
-            for oid, o in old:
-                if oid not in new and (
-                    np.hypot(*(o.goal - t.goal)) < MATCH_M
-                    or np.hypot(*(o.midpoint - t.midpoint)) < MATCH_M
-                ):
-                    tid = oid
-                    break
+            near = ~taken & (
+                (np.hypot(*(old_goals - t.goal).T) < MATCH_M)
+                | (np.hypot(*(old_mids - t.midpoint).T) < MATCH_M)
+            )
+            if near.any():
+                k = int(np.argmax(near))
+                taken[k] = True
+                tid = old_ids[k]
             if tid is None:
                 tid = self._next_id
                 self._next_id += 1
@@ -430,10 +467,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                             coord.on_status(rid, item.stamp_s, msg)
                         elif isinstance(msg, MapChunk) and item.payload is not None:
                             try:
-                                d = coord.on_robot_delta(
-                                    rid, item.stamp_s, decode_delta(item.payload)
-                                )
-                                _publish_delta(bus, keys, coord, d)
+                                coord.on_robot_delta(rid, item.stamp_s, decode_delta(item.payload))
                             except MapError as e:
                                 log.info("resync of %s: %s", rid, e)
                                 resync.add(rid)
@@ -449,14 +483,15 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                     if got is None:
                         continue
                     try:
-                        _publish_delta(
-                            bus, keys, coord, coord.on_robot_map(rid, decode_map(got[0]))
-                        )
+                        coord.on_robot_map(rid, decode_map(got[0]))
                         resync.discard(rid)
                     except PolyswarmError as e:
                         log.warning("map of %s refused: %s", rid, e)
+                if coord.flush_due():
+                    _publish_delta(bus, keys, coord, coord.flush())
                 if coord.due():
                     out = coord.cycle()
+                    _publish_delta(bus, keys, coord, out.merged_delta)
                     for rid, a in out.assignments.items():
                         coord.bytes_sent += bus.publish(
                             keys.assignment(rid), a, coord.now, reliable=True

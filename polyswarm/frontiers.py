@@ -9,6 +9,7 @@ precision grid (compared as integers, with one grid step of slack for rounding a
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -22,7 +23,7 @@ class FrontierSegment:
     points: np.ndarray  # (k, 2) polyline, free space on its left
     length_m: float
 
-    @property
+    @functools.cached_property
     def midpoint(self) -> np.ndarray:
         """The point halfway along the polyline."""
         return point_along(self.points, 0.5 * self.length_m)

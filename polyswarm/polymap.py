@@ -383,7 +383,10 @@ class GridPolyMap:
         return self._merge_pieces(idxs, pieces, src_starts, src_ends, options)
 
     def merge_cells(self, cells: Iterable[Cell]) -> MergeResult:
-        """Merge cells of another map on the same grid (the union of the two maps)."""
+        """Merge cells of other maps on the same grid (the union of all the maps).
+
+        Several cells may share an index (cells of several robots): their regions are
+        united first."""
         cells = [c for c in cells if c.polygons]
         for c in cells:
             if abs(c.size - self.cell_size) > 1e-9:
@@ -392,11 +395,15 @@ class GridPolyMap:
             return MergeResult(self, frozenset())
         # neighbours are touched too: their border vectors may turn from frontier to sector
         idxs = sorted({c.index for c in cells} | {n for c in cells for n in _neighbours(c.index)})
-        by_index = {c.index: c for c in cells}
-        pieces = np.array(
-            [by_index[i].region if i in by_index else shapely.Polygon() for i in idxs],
-            dtype=object,
-        )
+        by_index: dict[CellIndex, shapely.Geometry] = {}
+        for c in cells:
+            have = by_index.get(c.index)
+            by_index[c.index] = (
+                c.region
+                if have is None
+                else _union_snapped(np.array([have]), np.array([c.region]))[0]
+            )
+        pieces = np.array([by_index.get(i, shapely.Polygon()) for i in idxs], dtype=object)
         starts = [c.vectors_of_type(VectorType.OBSTACLE)[0] for c in cells]
         ends = [c.vectors_of_type(VectorType.OBSTACLE)[1] for c in cells]
         return self._merge_pieces(idxs, pieces, np.concatenate(starts), np.concatenate(ends))

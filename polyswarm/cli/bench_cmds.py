@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import typer
 
@@ -218,3 +219,162 @@ def bench_nav(
             ("paths closer than r to a wall", str(res["clearance_violations"])),
         ],
     )
+
+
+@bench_app.command("explore")
+def bench_explore(
+    as_json: bool = JSON_OPT,
+    worlds: str = typer.Option(
+        "data:loop,data:cross,data:maze,data:zigzag,office,rooms",
+        help="Worlds, comma separated (data:NAME, procedural names or .yaml paths).",
+    ),
+    robots: str = typer.Option("1,3", help="Robot counts, comma separated."),
+    seeds: int = typer.Option(5, min=1, help="Seeds per world and robot count."),
+    nearest: bool = typer.Option(
+        True, help="Also run the nearest-frontier baseline (3 robots, maze and loop)."
+    ),
+    speed: float = typer.Option(
+        0.0, help="Simulated seconds per wall second, at most (0: as fast as possible)."
+    ),
+    wall_limit: float = typer.Option(1800.0, help="Wall-clock seconds per exploration."),
+    load_robots: int = typer.Option(10, help="Robots of the coordinator load test (0: skip)."),
+    load_time: float = typer.Option(60.0, help="Simulated seconds of the load test."),
+    out: Path = typer.Option(None, help="Folder of the runs (default: a temporary folder)."),
+) -> None:
+    """Whole explorations (t99, success, IoU) and the coordinator cycle under load.
+
+    The full default matrix takes many hours on 2 cores; pass --worlds/--seeds/--robots
+    for a subset."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import explore as eb
+
+    console = Console(stderr=True)
+    with console.status("explorations") as status:
+
+        def on_run(k, n, spec, row) -> None:
+            what = f"{spec.world}, {spec.robots} robot(s), {spec.strategy}, seed {spec.seed}"
+            if row is None:
+                status.update(f"run {k + 1}/{n}: {what}")
+            else:
+                console.log(
+                    f"{what}: t99 {row['t99_s']} s, coverage {row['final_coverage']:.3f}, "
+                    f"wall {row['wall_time_s']:.0f} s"
+                )
+
+        res = eb.run(
+            [w for w in worlds.split(",") if w],
+            [int(r) for r in robots.split(",") if r],
+            seeds,
+            nearest,
+            speed,
+            wall_limit,
+            out,
+            load_robots,
+            load_time,
+            on_run,
+        )
+    if as_json:
+        typer.echo(json.dumps(res, indent=2, default=float))
+        return
+    from rich.table import Table
+
+    t = Table(title=f"Exploration, median t99 over {seeds} seed(s) (simulated s)")
+    for col in ("world", "robots/strategy", "t99 s", "reference s", "ratio"):
+        t.add_column(col, justify="right")
+    for w, d in res["t99_s"].items():
+        for key, v in d.items():
+            n = int(key.split("_")[0])
+            ref = eb.REFERENCE_T99_S.get((w, n)) if key.endswith("hungarian") else None
+            t.add_row(
+                w,
+                key.replace("_", " "),
+                "-" if v is None else f"{v:.0f}",
+                "-" if ref is None else f"{ref:.0f}",
+                "-" if (v is None or ref is None) else f"{v / ref:.2f}",
+            )
+    Console().print(t)
+    rows = [
+        ("success rate (runs reaching 99%)", f"{res['success_rate']:.2f}"),
+        ("map IoU, worst run", f"{res['map_iou_min']:.3f}" if res["map_iou_min"] else "-"),
+        ("wall collisions (all runs)", str(res["wall_collisions"])),
+        ("runs with a crashed process", str(res["crashed_runs"])),
+    ]
+    rows += [(f"t99 3 vs 1 robot, {w}", f"{v:.2f}") for w, v in res["t99_ratio_3_vs_1"].items()]
+    rows += [
+        (f"t99 hungarian vs nearest, {w}", f"{v:.2f}")
+        for w, v in res["t99_ratio_vs_nearest"].items()
+    ]
+    if "coordinator_load" in res:
+        ld = res["coordinator_load"]
+        rows.append(
+            (
+                f"coordinator cycle, {ld['robots']} robots, p50 / p95",
+                f"{ld['cycle_p50_ms']:.0f} / {ld['cycle_p95_ms']:.0f} ms",
+            )
+        )
+    _emit(res, False, "exploration summary", rows)
+
+
+@bench_app.command("bandwidth")
+def bench_bandwidth(
+    as_json: bool = JSON_OPT,
+    logs: bool = typer.Option(True, help="Measure every log of ../shared/data/logs."),
+    sim_world: str = typer.Option("office", help="World of the simulated exploration."),
+    sim_robots: int = typer.Option(3, min=0, help="Robots of the simulated run (0: skip)."),
+    sim_time: float = typer.Option(300.0, help="Simulated seconds of the exploration."),
+    seed: int = typer.Option(0, help="Seed of the odometry and sensor noise."),
+    out: Path = typer.Option(Path("runs/bandwidth"), help="Folder for CSV files and plots."),
+) -> None:
+    """PolyMap deltas against occupancy-grid sharing on the same scans and poses."""
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from polyswarm.benchmarks import bandwidth as bw
+    from polyswarm.config import Config
+    from polyswarm.data import shared_data_dir
+
+    cfg = Config()
+    results = []
+    console = Console(stderr=True)
+    with Progress(console=console, transient=True) as progress:
+        recordings = []
+        if logs:
+            for path in sorted((shared_data_dir() / "logs").glob("*.log*")):
+                task = progress.add_task(f"PolySLAM {path.name}", total=None)
+                recordings.append(bw.record_log(path, cfg, seed))
+                progress.remove_task(task)
+        if sim_robots > 0:
+            task = progress.add_task(f"exploring {sim_world} with {sim_robots}", total=None)
+            recordings.append(bw.record_simulation(sim_world, sim_robots, sim_time, seed, cfg))
+            progress.remove_task(task)
+        for rec in recordings:
+            task = progress.add_task(f"grid baseline {rec.name}", total=len(rec.keyframes))
+            res = bw.measure(rec, lambda k, n, task=task: progress.update(task, completed=k))
+            progress.remove_task(task)
+            bw.write_outputs(res, out)
+            results.append(res)
+    summary = bw.summary(results)
+    summary["out"] = str(out)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    if as_json:
+        typer.echo(json.dumps(summary, indent=2, default=float))
+        return
+    from rich.table import Table
+
+    t = Table(title="Bytes sent for the same map updates (cumulative)")
+    t.add_column("run")
+    for s in bw.SCHEMES:
+        t.add_column(s.replace("_", " "), justify="right")
+    t.add_column("PolyMap / best grid delta", justify="right")
+    t.add_column("map / PNG", justify="right")
+    for r in results:
+        c = r["cumulative_bytes"]
+        t.add_row(
+            r["name"],
+            *[bw.fmt_bytes(c[s]) for s in bw.SCHEMES],
+            f"{r['delta_bytes_ratio_vs_best_grid']:.3f}",
+            f"{r['map_bytes_ratio_vs_png']:.2f}",
+        )
+    Console().print(t)
+    console.print(f"CSV files and plots in {out}")

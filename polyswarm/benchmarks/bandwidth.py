@@ -1,0 +1,267 @@
+"""``polyswarm bench bandwidth``: PolyMap deltas against occupancy-grid map sharing.
+
+The same noisy scans and SLAM poses go into PolySLAM and into a log-odds 5 cm grid
+(``polyswarm.gridmap``, ray casting; never ground truth). At every keyframe, where
+PolySLAM emits a map delta, each scheme's message for that update is measured:
+
+* ``polymap_delta`` / ``polymap_delta_zlib``: the robot's PolyMap delta (wire codec);
+* ``grid_full`` / ``_zlib`` / ``_png``: the whole nav_msgs/OccupancyGrid (CDR);
+* ``grid_update`` / ``_zlib`` / ``_png``: a map_msgs/OccupancyGridUpdate of the bounding
+  box of the cells whose value changed (CDR).
+
+The grid's extent is fixed up front to the final map's bounds, so grid updates never
+need a full resend when the map grows: the baseline's best case. PNG sizes are of the
+cells only (no message header), also in the baseline's favour.
+Runs: every CARMEN log of ``../shared/data/logs`` and a simulated exploration.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from polyswarm.config import Config
+from polyswarm.gridmap import LogOddsGrid
+from polyswarm.polymap import GridPolyMap, MapDelta
+from polyswarm.scan import LaserScan
+
+SCHEMES = (
+    "polymap_delta",
+    "polymap_delta_zlib",
+    "grid_full",
+    "grid_full_zlib",
+    "grid_full_png",
+    "grid_update",
+    "grid_update_zlib",
+    "grid_update_png",
+)
+GRID_DELTA_SCHEMES = ("grid_update", "grid_update_zlib", "grid_update_png")
+GRID_RESOLUTION_M = 0.05
+BOUNDS_MARGIN_M = 1.0
+
+
+@dataclass
+class Keyframe:
+    robot: str
+    t_s: float
+    scan: LaserScan
+    pose: np.ndarray
+    delta_bytes: int
+    delta_zlib_bytes: int
+
+
+@dataclass
+class Recording:
+    """Keyframes of one run and the final PolyMap of each robot."""
+
+    name: str
+    keyframes: list[Keyframe] = field(default_factory=list)
+    maps: dict[str, GridPolyMap] = field(default_factory=dict)
+    mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    free_range_m: float = 3.0
+
+    def add(self, robot: str, t_s: float, scan: LaserScan, pose, delta: MapDelta) -> None:
+        from protocols.mapcodec import encode_delta
+
+        raw = encode_delta(delta)
+        self.keyframes.append(
+            Keyframe(robot, t_s, scan, np.asarray(pose, float), len(raw), len(zlib.compress(raw)))
+        )
+
+
+def png_bytes(data: np.ndarray) -> int:
+    """PNG size of a trinary grid as an 8-bit grey image (unknown 205, free 254, occupied 0,
+    as map_server saves it)."""
+    from PIL import Image
+
+    img = np.full(data.shape, 205, dtype=np.uint8)
+    img[data == 0] = 254
+    img[data == 100] = 0
+    buf = io.BytesIO()
+    Image.fromarray(img[::-1]).save(buf, format="PNG", optimize=True)
+    return buf.getbuffer().nbytes
+
+
+def _scan_bounds(kf: Keyframe, mount, free_range_m: float) -> tuple[float, float, float, float]:
+    r = np.asarray(kf.scan.ranges, dtype=float)
+    r = np.where(
+        np.isfinite(r) & (r < kf.scan.range_max), r, np.where(np.isinf(r), free_range_m, 0)
+    )
+    x, y, th = kf.pose
+    a = kf.scan.angles + th + mount[2]
+    xs = np.concatenate([[x], x + r * np.cos(a)])
+    ys = np.concatenate([[y], y + r * np.sin(a)])
+    return xs.min(), ys.min(), xs.max(), ys.max()
+
+
+def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) -> dict:
+    """Bytes per scheme per keyframe; cumulative totals and final map sizes."""
+    from protocols.mapcodec import encode_map
+    from protocols.ros import encode_grid_update, encode_occupancy_grid
+
+    if not rec.keyframes:
+        raise ValueError(f"{rec.name}: no keyframes")
+    b = np.array([_scan_bounds(k, rec.mount, rec.free_range_m) for k in rec.keyframes])
+    bounds = (
+        b[:, 0].min() - BOUNDS_MARGIN_M,
+        b[:, 1].min() - BOUNDS_MARGIN_M,
+        b[:, 2].max() + BOUNDS_MARGIN_M,
+        b[:, 3].max() + BOUNDS_MARGIN_M,
+    )
+    grids = {
+        r: LogOddsGrid(bounds, GRID_RESOLUTION_M, rec.free_range_m)
+        for r in sorted({k.robot for k in rec.keyframes})
+    }
+    rows = []
+    for n, kf in enumerate(rec.keyframes):
+        g = grids[kf.robot]
+        g.integrate(kf.scan, kf.pose, rec.mount)
+        box = g.changes()
+        full = g.trinary()
+        full_raw = encode_occupancy_grid(full, g.res, g.origin, kf.t_s)
+        row = {
+            "t_s": kf.t_s,
+            "robot": kf.robot,
+            "polymap_delta": kf.delta_bytes,
+            "polymap_delta_zlib": kf.delta_zlib_bytes,
+            "grid_full": len(full_raw),
+            "grid_full_zlib": len(zlib.compress(full_raw)),
+            "grid_full_png": png_bytes(full),
+            "grid_update": 0,
+            "grid_update_zlib": 0,
+            "grid_update_png": 0,
+            "known_m2": float((full != -1).sum()) * g.res**2,
+        }
+        if box is not None:
+            upd = encode_grid_update(box.data, box.row0, box.col0, kf.t_s)
+            row["grid_update"] = len(upd)
+            row["grid_update_zlib"] = len(zlib.compress(upd))
+            row["grid_update_png"] = png_bytes(box.data)
+        rows.append(row)
+        if progress:
+            progress(n + 1, len(rec.keyframes))
+    cumulative = {s: int(sum(r[s] for r in rows)) for s in SCHEMES}
+    best_grid = min(GRID_DELTA_SCHEMES, key=lambda s: cumulative[s])
+    poly_map = sum(len(encode_map(m)) for m in rec.maps.values())
+    poly_map_zlib = sum(len(zlib.compress(encode_map(m))) for m in rec.maps.values())
+    grid_png = sum(png_bytes(g.trinary()) for g in grids.values())
+    known = sum(g.known_area_m2() for g in grids.values())
+    return {
+        "name": rec.name,
+        "robots": len(grids),
+        "keyframes": len(rows),
+        "grid_cells": int(sum(g.logodds.size for g in grids.values())),
+        "cumulative_bytes": cumulative,
+        "best_grid_delta_scheme": best_grid,
+        "delta_bytes_ratio_vs_best_grid": cumulative["polymap_delta"] / cumulative[best_grid],
+        "delta_zlib_bytes_ratio_vs_best_grid": (
+            cumulative["polymap_delta_zlib"] / cumulative[best_grid]
+        ),
+        "final_map_bytes": {
+            "polymap": poly_map,
+            "polymap_zlib": poly_map_zlib,
+            "grid_png": grid_png,
+        },
+        "map_bytes_ratio_vs_png": poly_map / grid_png,
+        "known_area_m2": known,
+        "bytes_per_m2": {s: cumulative[s] / max(known, 1e-9) for s in SCHEMES},
+        "rows": rows,
+    }
+
+
+# --- recordings --------------------------------------------------------------------------------
+
+
+def record_log(path: Path, cfg: Config, seed: int = 0) -> Recording:
+    """PolySLAM over a CARMEN log with the default noisy odometry."""
+    from polyswarm.io.carmen import read_carmen
+    from polyswarm.odometry import IncrementNoise, noisy_odometry
+    from polyswarm.slam import PolySlam
+
+    log = read_carmen(path)
+    ref = log.reference
+    odom = noisy_odometry(ref, IncrementNoise(), seed)
+    slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=ref[0])
+    m = cfg.slam.mount
+    rec = Recording(
+        Path(path).name.split(".")[0],
+        mount=(m.x_m, m.y_m, m.yaw_rad),
+        free_range_m=cfg.slam.frontier_range_m,
+    )
+    for k, s in enumerate(log.scans):
+        step = slam.process(s.scan, odom[k])
+        if step.delta is not None:
+            rec.add("r1", float(s.stamp), s.scan, step.pose, step.delta)
+    rec.maps["r1"] = slam.map
+    return rec
+
+
+def record_simulation(world: str, robots: int, sim_s: float, seed: int, cfg: Config) -> Recording:
+    """A simulated exploration (in one process): every robot's keyframes."""
+    from polyswarm.benchmarks.inproc import explore_in_process
+
+    m = cfg.slam.mount
+    rec = Recording(
+        f"sim-{world.replace(':', '_')}-{robots}",
+        mount=(m.x_m, m.y_m, m.yaw_rad),
+        free_range_m=cfg.slam.frontier_range_m,
+    )
+    run = explore_in_process(world, robots, sim_s, seed, cfg, on_keyframe=rec.add)
+    rec.maps = {a.id: a.slam.map for a in run.agents}
+    rec.name += f"-{run.sim_time_s:.0f}s"
+    return rec
+
+
+def write_outputs(res: dict, out: Path) -> None:
+    """CSV of every update and PNG plots (cumulative bytes, bytes per square metre)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    rows = res["rows"]
+    with open(out / f"{res['name']}.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    t = np.array([r["t_s"] for r in rows])
+    t = t - t[0]
+    known = np.array([r["known_m2"] for r in rows])
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.5))
+    for s in SCHEMES:
+        c = np.cumsum([r[s] for r in rows])
+        ax1.plot(t, c, label=s, lw=2.5 if s.startswith("polymap") else 1.2)
+        ax2.plot(known, c, label=s, lw=2.5 if s.startswith("polymap") else 1.2)
+    ax1.set(xlabel="time (s)", ylabel="cumulative bytes", yscale="log", title=res["name"])
+    ax2.set(xlabel="known area of the grid (m²)", ylabel="cumulative bytes", yscale="log")
+    ax2.set_title("bytes against area mapped")
+    ax1.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / f"{res['name']}.png", dpi=110)
+    plt.close(fig)
+
+
+def summary(results: list[dict]) -> dict:
+    """The issue's keys: worst case over runs, and per run."""
+    return {
+        "delta_bytes_ratio_vs_best_grid": max(r["delta_bytes_ratio_vs_best_grid"] for r in results),
+        "map_bytes_ratio_vs_png": max(r["map_bytes_ratio_vs_png"] for r in results),
+        "cumulative_bytes": {r["name"]: r["cumulative_bytes"] for r in results},
+        "runs": {r["name"]: {k: v for k, v in r.items() if k != "rows"} for r in results},
+    }
+
+
+def fmt_bytes(n: float) -> str:
+    if n >= 1e6:
+        return f"{n / 1e6:.1f} MB"
+    if n >= 1e3:
+        return f"{n / 1e3:.1f} kB"
+    return f"{math.floor(n)} B"

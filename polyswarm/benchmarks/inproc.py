@@ -1,0 +1,107 @@
+"""A whole exploration in one process: simulator, robot agents and coordinator wired
+directly (no Zenoh), for benchmarks that measure the parts rather than the transport.
+
+Deltas still pass through the wire codec, so their sizes are the sizes on the wire.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyswarm.config import Config, RobotEntry
+from polyswarm.polymap import MapDelta
+from polyswarm.scan import LaserScan
+
+# (robot id, simulated time s, scan, SLAM pose (x, y, theta), the robot's map delta)
+KeyframeHook = Callable[[str, float, LaserScan, np.ndarray, MapDelta], None]
+
+
+@dataclass
+class InProcessRun:
+    coordinator: object  # agents.coordinator.Coordinator
+    agents: list
+    sim_time_s: float
+    delta_bytes: int
+    coverage: list[tuple[float, float]]  # (simulated s, fraction of the free space)
+
+
+def explore_in_process(
+    world_name: str,
+    robots: int,
+    sim_s: float,
+    seed: int = 0,
+    cfg: Config | None = None,
+    on_keyframe: KeyframeHook | None = None,
+    stop_coverage: float = 1.01,
+) -> InProcessRun:
+    import shapely
+
+    from agents.coordinator import Coordinator
+    from agents.robot import RobotAgent
+    from protocols.mapcodec import decode_delta, encode_delta
+    from protocols.messages import MissionState, Odometry
+    from sim import Simulation, load_world, spread_start_poses
+
+    cfg = cfg or Config()
+    world = load_world(world_name, seed=seed)
+    starts = spread_start_poses(world, robots, cfg.sim.robot.radius_m)
+    cfg = dataclasses.replace(
+        cfg,
+        sim=dataclasses.replace(cfg.sim, seed=seed),
+        robots=tuple(RobotEntry(f"r{k + 1}", s) for k, s in enumerate(starts)),
+    )
+    agents = [RobotAgent(f"r{k + 1}", cfg, starts[k]) for k in range(robots)]
+    coord = Coordinator(cfg, {a.id: a.start_pose for a in agents})
+    for a in agents:
+        coord.on_alive(a.id, True)
+    delta_bytes = 0
+    coverage: list[tuple[float, float]] = []
+    free = world.free
+    next_sample = 0.0
+    with Simulation(world, cfg.sim, robots, start_poses=starts) as sim:
+        while sim.time < sim_s:
+            events = sim.step()
+            for ev in events:
+                a = agents[ev.robot]
+                a.on_odom(sim.time, Odometry(*ev.odom))
+                out = a.on_scan(sim.time, ev.scan)
+                if out.cmd:
+                    sim.set_cmd(ev.robot, *out.cmd)
+                if out.delta is not None:
+                    wire = encode_delta(out.delta)
+                    delta_bytes += len(wire)
+                    coord.on_robot_delta(a.id, sim.time, decode_delta(wire))
+                    if on_keyframe is not None:
+                        on_keyframe(a.id, sim.time, ev.scan, a.pose.copy(), out.delta)
+                if out.pose is not None:
+                    coord.on_pose(a.id, sim.time, out.pose)
+                    for b in agents:
+                        b.on_peer_pose(a.id, sim.time, out.pose)
+                if out.status is not None:
+                    coord.on_status(a.id, sim.time, out.status)
+            if not events:
+                continue
+            merged = coord.flush() if coord.flush_due() else None
+            if coord.due():
+                o = coord.cycle()
+                merged = merged or o.merged_delta  # a cycle right after a flush merges nothing
+                for rid, asg in o.assignments.items():
+                    agents[int(rid[1:]) - 1].on_assignment(asg, sim.time)
+            if merged is not None:
+                for b in agents:
+                    if b.merged is None:
+                        b.on_merged_map(coord.merged)
+                    else:
+                        b.on_merged_delta(merged)
+            if sim.time >= next_sample:
+                next_sample += 1.0
+                region = coord.merged.explored_region()
+                cov = shapely.intersection(region, free).area / free.area
+                coverage.append((sim.time, cov))
+                if cov >= stop_coverage or coord.state == MissionState.DONE:
+                    break
+    return InProcessRun(coord, agents, sim.time, delta_bytes, coverage)

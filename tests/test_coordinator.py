@@ -1,0 +1,148 @@
+"""Frontier assignment (hand-checked) and the coordinator's logic (no transport)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agents.coordinator import Coordinator
+from polyswarm.config import Config
+from polyswarm.explore import Strategy, assign
+from polyswarm.polymap import GridPolyMap
+from protocols.mapcodec import decode_delta, encode_delta
+from protocols.messages import AssignmentKind, MissionState, Pose, RobotState, RobotStatus
+from tests.conftest import F, O, rect
+
+INF = math.inf
+
+
+# --- assignment ----------------------------------------------------------------------------
+
+
+def test_hungarian_minimises_the_total_cost():
+    costs = np.array([[1.0, 10.0], [2.0, 3.0]])
+    # both robots are nearest to target 0; the optimum sends robot 1 to target 1 (4 < 12)
+    assert assign(Strategy.HUNGARIAN, costs, [0.0, 0.0]) == [0, 1]
+    assert assign(Strategy.NEAREST, costs, [0.0, 0.0]) == [0, 0]
+
+
+def test_greedy_discounts_targets_near_a_taken_one():
+    costs = np.array([[1.0, 1.5, 6.0], [1.2, 1.6, 4.0]])
+    goals = np.array([[0.0, 0.0], [0.5, 0.0], [20.0, 0.0]])
+    util = [4.0, 4.0, 4.0]
+    out = assign(Strategy.GREEDY, costs, util, goals=goals, separation_m=3.0)
+    # robot 0 takes target 0; target 1 beside it loses its utility, so robot 1 goes far
+    assert out == [0, 2]
+
+
+def test_unreachable_targets_and_extra_robots_get_none():
+    costs = np.array([[INF, 2.0], [INF, 3.0], [INF, INF]])
+    assert assign(Strategy.HUNGARIAN, costs, [1.0, 1.0]) == [1, None, None]
+    assert assign(Strategy.HUNGARIAN, np.zeros((2, 0)), []) == [None, None]
+
+
+def test_hysteresis_keeps_the_current_target_unless_clearly_beaten():
+    costs = np.array([[5.0, 4.5]])
+    assert assign(Strategy.HUNGARIAN, costs, [0.0, 0.0], current=[0], hysteresis=0.8) == [0]
+    costs = np.array([[5.0, 3.0]])
+    assert assign(Strategy.HUNGARIAN, costs, [0.0, 0.0], current=[0], hysteresis=0.8) == [1]
+
+
+# --- the coordinator -------------------------------------------------------------------------
+
+
+def corridor_map(open_end: bool) -> GridPolyMap:
+    """A 12 m x 2 m corridor, its right end a frontier (or a wall)."""
+    return GridPolyMap(2.0).merge(rect(0.0, 0.0, 12.0, 2.0, (O, F if open_end else O, O, O))).map
+
+
+def coordinator(n: int = 2) -> Coordinator:
+    starts = {f"r{k + 1}": (1.0 + k, 1.0, 0.0) for k in range(n)}
+    c = Coordinator(Config(), starts)
+    for rid, (x, y, _) in starts.items():
+        c.on_alive(rid, True)
+        c.on_pose(rid, 0.0, Pose(x, y, 0.0))
+    return c
+
+
+def feed(c: Coordinator, rid: str, pmap: GridPolyMap, t: float) -> None:
+    base = c.robot(rid).map
+    delta = pmap.delta_since(0 if base is None else base.version)
+    c.on_robot_delta(rid, t, decode_delta(encode_delta(delta)))
+
+
+def test_coordinator_sends_one_robot_to_the_frontier_and_ends_when_it_closes():
+    c = coordinator(2)
+    feed(c, "r1", corridor_map(open_end=True), 0.1)
+    out = c.cycle()
+    assert out.merged_delta is not None  # the robots' cells were merged
+    assert c.state == MissionState.EXPLORING
+    kinds = {rid: a.kind for rid, a in out.assignments.items()}
+    # one frontier: one robot goes (the nearer one), the other waits
+    assert kinds == {"r2": AssignmentKind.EXPLORE}
+    goal = np.array(out.assignments["r2"].goal)
+    assert 9.0 < goal[0] < 12.0 and 0.0 < goal[1] < 2.0
+    # r2 explores the end: the frontier becomes a wall, the mission ends and all go home
+    closed = corridor_map(open_end=False)
+    feed(c, "r2", closed, 1.0)
+    c.now = 1.0
+    c.cycle()
+    c.now = 1.0 + Config().explore.end_confirm_s
+    out = c.cycle()
+    assert c.state == MissionState.RETURNING
+    homes = {rid: a.goal for rid, a in out.assignments.items()}
+    assert homes == {"r1": (1.0, 1.0), "r2": (2.0, 1.0)}
+    for rid in ("r1", "r2"):
+        c.on_status(rid, c.now, RobotStatus(RobotState.HOME, c.robots[rid].assignment.target))
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.DONE
+
+
+def test_a_robot_that_leaves_frees_its_target_and_keeps_its_map():
+    c = coordinator(2)
+    feed(c, "r2", corridor_map(open_end=True), 0.1)
+    c.cycle()
+    assert c.robots["r2"].assignment.kind == AssignmentKind.EXPLORE
+    area = c.merged.explored_area()
+    c.on_alive("r2", False)
+    c.now = 2.0
+    out = c.cycle()
+    assert set(out.assignments) == {"r1"}
+    assert c.merged.explored_area() == pytest.approx(area)  # nothing r2 mapped is lost
+
+
+def test_repeated_failures_blacklist_a_target():
+    c = coordinator(1)
+    feed(c, "r1", corridor_map(open_end=True), 0.1)
+    for k in range(Config().explore.blacklist_after_failures):
+        c.now = 1.0 + 40.0 * k  # past the exclusion of a failed target
+        c.cycle()
+        a = c.robots["r1"].assignment
+        assert a is not None and a.kind == AssignmentKind.EXPLORE
+        c.on_status("r1", c.now, RobotStatus(RobotState.NAVIGATING, a.target))
+        c.on_status("r1", c.now, RobotStatus(RobotState.UNREACHABLE, a.target))
+    assert len(c.blacklist) > 0
+    c.now += 40.0
+    c.cycle()
+    assert c.targets == {}  # the only frontier is blacklisted
+
+
+def test_a_delta_gap_is_refused_and_a_full_map_resyncs():
+    c = coordinator(1)
+    m = corridor_map(open_end=True)
+    later = m.merge(rect(0.0, 2.0, 2.0, 4.0, (O, O, O, F))).map
+    with pytest.raises(Exception, match="version"):
+        c.on_robot_delta("r1", 0.1, later.delta_since(m.version))
+    c.on_robot_map("r1", later)
+    c.cycle()
+    assert c.merged.explored_area() == pytest.approx(later.explored_area(), rel=1e-6)
+
+
+def test_cells_of_two_robots_in_the_same_cell_are_united():
+    a = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.8, (O, F, O, O))).map
+    b = GridPolyMap(2.0).merge(rect(1.0, 0.2, 1.8, 1.8, (O, O, O, F))).map
+    merged = GridPolyMap(2.0).merge_cells(list(a.cells.values()) + list(b.cells.values())).map
+    assert merged.explored_area() == pytest.approx(0.8 * 1.6 * 2, rel=1e-6)

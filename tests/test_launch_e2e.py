@@ -1,0 +1,50 @@
+"""End to end: ``polyswarm launch`` with every part its own process, Zenoh on loopback."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from protocols.files import read_polymap
+
+REQUIRED = {
+    "coverage_over_time",
+    "t90_s",
+    "t99_s",
+    "final_coverage",
+    "total_path_length_m",
+    "per_robot_path_length_m",
+    "bytes_sent_per_robot",
+    "map_iou",
+    "collisions",
+    "wall_time_s",
+}
+
+
+def test_launch_two_robots_explores_rooms_to_95_percent(tmp_path):
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "2", "--world", "rooms"]
+    cmd += ["--stop-coverage", "0.95", "--wall-limit", "90", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    m = json.loads((out / "metrics.json").read_text())
+    assert REQUIRED <= m.keys()
+    assert m["final_coverage"] >= 0.95, m["stopped_because"]
+    assert m["wall_time_s"] <= 90.0
+    assert m["collisions"]["walls"] == 0
+    assert m["crashed_processes"] == []
+    assert m["map_iou"] >= 0.9
+    assert set(m["bytes_sent_per_robot"]) == {"r1", "r2"}
+    assert all(b > 0 for b in m["bytes_sent_per_robot"].values())
+    assert all(length > 0 for length in m["per_robot_path_length_m"].values())
+    # outputs: the merged map in three forms, trajectories, config, coverage plot
+    merged = read_polymap(out / "map.polymap")
+    assert merged.explored_area() > 0.9 * 54.0  # the rooms world has ~55 m2 of free space
+    for name in ("map.svg", "map.png", "coverage.png", "config.toml", "metrics.json"):
+        assert (out / name).stat().st_size > 0, name
+    for rid in ("r1", "r2"):
+        lines = (out / "trajectories" / f"{rid}.tum").read_text().split("\n")
+        assert len([ln for ln in lines if ln and not ln.startswith("#")]) > 10
+    for name in ("coordinator", "sim", "r1", "r2"):
+        assert (out / "logs" / f"{name}.log").exists()
