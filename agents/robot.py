@@ -38,7 +38,6 @@ from protocols.mapcodec import decode_delta, decode_map, encode_delta, encode_ma
 from protocols.messages import (
     Assignment,
     AssignmentKind,
-    CmdVel,
     CoordinatorStatus,
     MapChunk,
     MapKind,
@@ -63,6 +62,7 @@ YIELD_S = 6.0  # ... driving about a metre away for at most this long
 PEER_NEAR_M = 1.5
 PEER_FRESH_S = 2.0
 FACING_RAD = 0.3  # at the goal, turn until the frontier is this close to straight ahead
+SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
 
 
@@ -145,6 +145,10 @@ class RobotAgent:
         if self._last_odom_xy is not None:
             self.stats.distance_m += float(np.hypot(*(pose[:2] - self._last_odom_xy)))
         self._last_odom_xy = pose[:2]
+
+    @property
+    def latest_odom_s(self) -> float:
+        return self._odom_t[-1] if self._odom_t else -math.inf
 
     def odom_at(self, stamp_s: float) -> np.ndarray | None:
         """Odometry at ``stamp_s``: interpolated between the two around it."""
@@ -427,9 +431,14 @@ def run_agent(
     session_spec,
     stop: threading.Event | None = None,
     duration_s: float = 0.0,
+    attach=None,
 ) -> RobotAgent:
-    """Run the agent on a Zenoh session until ``stop`` is set (or SIGINT/SIGTERM)."""
+    """Run the agent on a Zenoh session until ``stop`` is set (or SIGINT/SIGTERM).
+
+    ``attach(session, agent, stop)``, if given, is called once the agent listens (a log
+    player feeding it, for example); it may return a function called at shutdown."""
     from agents.session import Bus, is_alive_change, open_session, stop_on_signals
+    from agents.sources import CommandSink, subscribe_sensors
 
     stop = stop or stop_on_signals()
     keys = SwarmKeys(cfg.comms.swarm)
@@ -439,16 +448,24 @@ def run_agent(
     with open_session(session_spec) as session:
         bus = Bus(session, robot_id)
         try:
-            bus.subscribe(me.odom, Odometry)
+            sensors = subscribe_sensors(bus, me, cfg.agent)
+            sink = CommandSink(bus, me, cfg.agent)
             bus.subscribe(keys.all_robots("pose"), Pose)
-            bus.subscribe(me.scan, Scan)
             bus.subscribe(keys.assignment(robot_id), Assignment)
             bus.subscribe(keys.merged_delta, MapChunk)
             bus.subscribe(keys.coordinator_status, CoordinatorStatus)
             bus.serve_map(me.map, lambda: (encode_map(agent.slam.map), agent.slam.map.version))
             bus.declare_alive(keys.alive("agent", robot_id))
             bus.watch_alive(keys.all_alive("coordinator"))
-            log.info("agent %s up (start pose %s)", robot_id, tuple(agent.start_pose))
+            log.info(
+                "agent %s up (start pose %s, sensors on %s, output %s)",
+                robot_id,
+                tuple(agent.start_pose),
+                sensors,
+                cfg.agent.output,
+            )
+            detach = attach(session, agent, stop) if attach is not None else None
+            waiting: list = []  # (wall time, scan item) waiting for odometry
             need_merged = False
             behind_since = None  # the merged map we hold is older than the coordinator's
             while not stop.is_set() and time.monotonic() < t_end:
@@ -461,15 +478,22 @@ def run_agent(
                     try:
                         if isinstance(msg, Odometry):
                             agent.on_odom(item.stamp_s, msg)
+                            while waiting and waiting[0][1].stamp_s <= item.stamp_s:
+                                _process_scan(bus, me, agent, waiting.pop(0)[1], sink)
                         elif isinstance(msg, Scan):
-                            out = agent.on_scan(item.stamp_s, scan_from_message(msg, item.stamp_s))
-                            _send(bus, me, agent, out, item.stamp_s, item.seq)
+                            # odometry and scans travel on separate keys: a scan waits
+                            # (briefly) for the odometry of its time
+                            if agent.latest_odom_s >= item.stamp_s:
+                                _process_scan(bus, me, agent, item, sink)
+                            else:
+                                waiting.append((time.monotonic(), item))
                         elif isinstance(msg, Pose):
                             rid = keys.robot_of(item.key)
                             if rid is not None:
                                 agent.on_peer_pose(rid, item.stamp_s, msg)
                         elif isinstance(msg, Assignment):
                             agent.on_assignment(msg, item.stamp_s)
+                            sink.assignment(agent.assignment, item.stamp_s)
                         elif isinstance(msg, MapChunk) and item.payload is not None:
                             try:
                                 agent.on_merged_delta(decode_delta(item.payload))
@@ -485,6 +509,8 @@ def run_agent(
                         log.warning("%s: rejected %s: %s", robot_id, item.key, e)
                     except PolyswarmError as e:
                         log.warning("%s: %s", robot_id, e)
+                while waiting and time.monotonic() - waiting[0][0] > SCAN_WAIT_S:
+                    _process_scan(bus, me, agent, waiting.pop(0)[1], sink)
                 if need_merged:
                     got = bus.fetch_map(keys.merged_map, timeout_s=2.0)
                     if got is not None:
@@ -494,13 +520,24 @@ def run_agent(
                         except DecodeError as e:
                             log.warning("%s: bad merged map: %s", robot_id, e)
         finally:
+            if attach is not None and detach is not None:
+                detach()
             bus.close()
     return agent
 
 
-def _send(bus, me, agent: RobotAgent, out: Outbox, stamp_s: float, scan_seq: int) -> None:
+def _process_scan(bus, me, agent: RobotAgent, item, sink) -> None:
+    try:
+        out = agent.on_scan(item.stamp_s, scan_from_message(item.msg, item.stamp_s))
+    except PolyswarmError as e:
+        log.warning("%s: scan %d refused: %s", agent.id, item.seq, e)
+        return
+    _send(bus, me, agent, out, item.stamp_s, item.seq, sink)
+
+
+def _send(bus, me, agent: RobotAgent, out: Outbox, stamp_s: float, scan_seq: int, sink) -> None:
     if out.cmd is not None:
-        bus.publish(me.cmd_vel, CmdVel(out.cmd[0], out.cmd[1], scan_seq), stamp_s)
+        sink.velocity(out.cmd[0], out.cmd[1], scan_seq, stamp_s)
     sent = 0
     if out.delta is not None:
         d = out.delta

@@ -256,6 +256,30 @@ class Bus:
 
         self._handles.append(self.session.declare_subscriber(key, on_sample))
 
+    def subscribe_raw(self, key: str, decode_fn: Callable[[bytes], tuple[float, Message]]) -> None:
+        """Queue messages of a foreign format (ROS 2 CDR): ``decode_fn`` turns the bytes
+        into (stamp, message) or raises DecodeError (counted and logged)."""
+        seq = iter(range(1 << 62))
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            k = str(sample.key_expr)
+            try:
+                stamp, msg = decode_fn(sample.payload.to_bytes())
+                self._put(Received(k, "ros", next(seq), stamp, msg))
+            except DecodeError as e:
+                self.rejected += 1
+                self._warn(k, f"rejected message on {k}: {e}")
+            except Exception:
+                log.exception("handling a message on %s failed", k)
+
+        self._handles.append(self.session.declare_subscriber(key, on_sample))
+
+    def put_raw(self, key: str, data: bytes, reliable: bool = False) -> int:
+        """Send bytes of a foreign format (ROS 2 CDR); returns their size."""
+        self._publisher(key, reliable).put(data)
+        self.bytes_sent[key] = self.bytes_sent.get(key, 0) + len(data)
+        return len(data)
+
     def watch_alive(self, key: str) -> None:
         """Queue liveliness changes under ``key`` (see ``is_alive_change``)."""
 

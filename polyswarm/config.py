@@ -16,6 +16,7 @@ import tomllib
 import types
 import typing
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -177,6 +178,38 @@ class CommsConfig:
     zenoh_config: str = ""  # optional path to a Zenoh JSON5 config file
 
 
+class SensorSource(StrEnum):
+    NATIVE = "native"  # polyswarm Scan and Odometry messages (the simulator, log replay)
+    ROS2 = "ros2"  # sensor_msgs/LaserScan and nav_msgs/Odometry CDR (zenoh-bridge-ros2dds)
+
+
+class CommandOutput(StrEnum):
+    NATIVE = "native"  # polyswarm CmdVel messages (the simulator)
+    TWIST = "twist"  # geometry_msgs/Twist CDR on cmd_vel_key
+    GOAL = "goal"  # geometry_msgs/PoseStamped of the assigned goal on goal_key (own nav stack)
+    NONE = "none"  # drive nothing (log replay, mapping only)
+
+
+@dataclass(frozen=True)
+class AgentIoConfig:
+    """Where a robot agent reads its sensors and sends its commands.
+
+    ``{ns}`` in a key is replaced by ``namespace`` (keys as zenoh-bridge-ros2dds exposes
+    ROS 2 topics: ``/tb3_1/scan`` becomes ``tb3_1/scan``)."""
+
+    source: str = "native"  # SensorSource
+    output: str = "native"  # CommandOutput
+    namespace: str = ""
+    scan_key: str = "{ns}/scan"
+    odom_key: str = "{ns}/odom"
+    cmd_vel_key: str = "{ns}/cmd_vel"
+    goal_key: str = "{ns}/goal_pose"
+    map_frame: str = "map"  # frame id of goals sent to the robot's navigation stack
+
+    def key(self, template: str) -> str:
+        return template.replace("{ns}", self.namespace).strip("/")
+
+
 @dataclass(frozen=True)
 class Config:
     map: MapConfig = field(default_factory=MapConfig)
@@ -185,6 +218,7 @@ class Config:
     nav: NavConfig = field(default_factory=NavConfig)
     explore: ExploreConfig = field(default_factory=ExploreConfig)
     comms: CommsConfig = field(default_factory=CommsConfig)
+    agent: AgentIoConfig = field(default_factory=AgentIoConfig)
     robots: tuple[RobotEntry, ...] = ()  # [[robots]] tables: ids and start poses
 
 
@@ -328,6 +362,16 @@ def validate(cfg: Config) -> None:
         raise ConfigError(
             f"explore.strategy must be hungarian, greedy or nearest, got {cfg.explore.strategy!r}"
         )
+    if cfg.agent.source not in tuple(SensorSource):
+        raise ConfigError(f"agent.source must be native or ros2, got {cfg.agent.source!r}")
+    if cfg.agent.output not in tuple(CommandOutput):
+        raise ConfigError(
+            f"agent.output must be native, twist, goal or none, got {cfg.agent.output!r}"
+        )
+    for name in ("scan_key", "odom_key", "cmd_vel_key", "goal_key"):
+        key = cfg.agent.key(getattr(cfg.agent, name))
+        if not key or any(ch in key for ch in "*$?#") or "//" in key:
+            raise ConfigError(f"agent.{name}: {key!r} is not a plain Zenoh key")
     ids = [r.id for r in cfg.robots]
     if len(set(ids)) != len(ids):
         raise ConfigError(f"robots: ids must be unique, got {ids}")

@@ -210,3 +210,24 @@ def encode_grid_update(
         data=np.ascontiguousarray(data, dtype=np.int8).reshape(-1),
     )
     return bytes(ts.serialize_cdr(msg, GRID_UPDATE))
+
+
+def encode_goal(goal_xy, stamp_s: float = 0.0, frame: str = "map", yaw_rad: float = 0.0) -> bytes:
+    """geometry_msgs/PoseStamped of a goal point (for the robot's own navigation stack)."""
+    ts = typestore()
+    t = ts.types
+    msg = t["geometry_msgs/msg/PoseStamped"](
+        header=_header(stamp_s, frame),
+        pose=t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](x=float(goal_xy[0]), y=float(goal_xy[1]), z=0.0),
+            orientation=t["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=math.sin(yaw_rad / 2), w=math.cos(yaw_rad / 2)
+            ),
+        ),
+    )
+    return bytes(ts.serialize_cdr(msg, "geometry_msgs/msg/PoseStamped"))
+
+
+def decode_goal(data: bytes) -> tuple[float, float]:
+    m = _deserialize(data, "geometry_msgs/msg/PoseStamped")
+    return float(m.pose.position.x), float(m.pose.position.y)

@@ -26,10 +26,10 @@ def test_launch_two_robots_explores_rooms_to_95_percent(tmp_path):
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "2", "--world", "rooms"]
     cmd += ["--stop-coverage", "0.95", "--wall-limit", "90", "--out", str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=180, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     m = json.loads((out / "metrics.json").read_text())
-    assert REQUIRED <= m.keys()
+    assert m.keys() >= REQUIRED
     assert m["final_coverage"] >= 0.95, m["stopped_because"]
     assert m["wall_time_s"] <= 90.0
     assert m["collisions"]["walls"] == 0

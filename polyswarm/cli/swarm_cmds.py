@@ -37,17 +37,68 @@ def agent_cmd(
         None, help="Start pose x,y,theta (metres, radians) in the shared map frame."
     ),
     duration: float = typer.Option(0.0, help="Stop after this many wall seconds (0: run)."),
+    replay: Path | None = typer.Option(
+        None, help="Feed this CARMEN log (.log or .log.gz) instead of live sensors."
+    ),
+    rate: float = typer.Option(
+        1.0, help="Replay speed: log seconds per wall second (0: as fast as the agent runs)."
+    ),
+    listen: str | None = typer.Option(
+        None,
+        help="Be the Zenoh router yourself, listening on this endpoint (e.g. "
+        "tcp/127.0.0.1:7447), instead of connecting to one: try an agent alone.",
+    ),
+    out: Path | None = typer.Option(
+        None, help="Write the agent's final map here (.polymap; .svg/.png next to it)."
+    ),
 ) -> None:
     """Run a robot agent: PolySLAM, map deltas, planning and local control over Zenoh."""
+    import dataclasses
     import logging
+    import threading
 
     from agents.robot import run_agent
-    from agents.session import SessionSpec
+    from agents.session import SessionSpec, stop_on_signals
     from polyswarm.config import load_config
-    from protocols.keys import check_name
+    from protocols.keys import SwarmKeys, check_name
 
     check_name(robot_id, "robot id")
     cfg = load_config(config)
+    attach = None
+    stop = stop_on_signals()
+    player = None
+    if replay is not None:
+        from polyswarm.runners.replay import LogPlayer, start_player
+
+        player = LogPlayer(replay, rate)
+        # the log's scans arrive as native messages; commands carry the acknowledgements
+        cfg = dataclasses.replace(
+            cfg, agent=dataclasses.replace(cfg.agent, source="native", output="native")
+        )
+        me = SwarmKeys(cfg.comms.swarm).robot(robot_id)
+
+        def attach(session, agent, stop_event):
+            _thread, bus, sub = start_player(player, session, me, stop_event)
+
+            def finish() -> None:  # all scans published and processed: stop the agent
+                player.done.wait()
+                deadline = threading.Event()
+                for _ in range(600):
+                    if agent.stats.scans >= player.published or stop_event.is_set():
+                        break
+                    deadline.wait(0.1)
+                stop_event.set()
+
+            threading.Thread(target=finish, daemon=True).start()
+
+            def detach() -> None:
+                sub.undeclare()
+                bus.close()
+
+            return detach
+
+        if start is None:
+            start = ",".join(str(v) for v in player.start_pose)
     pose = _pose(start)
     if pose is None:
         entry = next((r for r in cfg.robots if r.id == robot_id), None)
@@ -58,10 +109,20 @@ def agent_cmd(
             pose = (0.0, 0.0, 0.0)
         else:
             pose = tuple(entry.start)
-    spec = SessionSpec.client(
-        endpoint or cfg.comms.endpoint, str(zenoh_config or cfg.comms.zenoh_config or "")
-    )
-    agent = run_agent(robot_id, cfg, pose, spec, duration_s=duration)
+    zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
+    if listen:
+        spec = SessionSpec.router(listen, zconf)
+    else:
+        spec = SessionSpec.client(endpoint or cfg.comms.endpoint, zconf)
+    agent = run_agent(robot_id, cfg, pose, spec, stop=stop, duration_s=duration, attach=attach)
+    if out is not None:
+        from polyswarm.io.export import export_map
+        from protocols.files import write_polymap
+
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_polymap(agent.slam.map, out)
+        export_map(agent.slam.map, out.with_suffix(".svg"))
+        export_map(agent.slam.map, out.with_suffix(".png"))
     s = agent.stats
     typer.echo(
         f"{robot_id}: {s.scans} scans, {s.keyframes} keyframes, {s.distance_m:.1f} m, "
@@ -203,3 +264,42 @@ def launch_cmd(
         table.add_row(k, v)
     Console().print(table)
     typer.echo(f"wrote {res.out}", err=True)
+
+
+@app.command("fleet-config")
+def fleet_config_cmd(
+    robots: str = typer.Option(..., help="Robot ids, comma separated (e.g. r1,r2,r3)."),
+    swarm: str = typer.Option("lab", help="Swarm name (the key prefix polyswarm/<swarm>)."),
+    listen: str = typer.Option("tls/0.0.0.0:7447", help="Router endpoint."),
+    users_file: str = typer.Option("/etc/polyswarm/users.txt", help="user:password lines."),
+    certs: str = typer.Option("/etc/polyswarm/certs", help="Folder of ca.pem, router.pem, ..."),
+    mtls: bool = typer.Option(True, help="Require client certificates (mTLS)."),
+    out: Path = typer.Option(Path("."), help="Folder for the JSON5 files."),
+) -> None:
+    """Write Zenoh configs of a secured fleet: router (TLS, users, ACL) and one per robot."""
+    import json
+
+    from agents.fleet import client_config, router_config
+
+    ids = [r for r in robots.split(",") if r]
+    tls = {
+        "root_ca_certificate": f"{certs}/ca.pem",
+        "listen_certificate": f"{certs}/router.pem",
+        "listen_private_key": f"{certs}/router-key.pem",
+        "enable_mtls": mtls,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "zenoh-router.json5").write_text(
+        json.dumps(router_config(swarm, ids, listen, users_file, tls), indent=2)
+    )
+    connect = listen.replace("0.0.0.0", "coordinator.local")
+    for rid in ids:
+        ctls = {"root_ca_certificate": f"{certs}/ca.pem", "enable_mtls": mtls}
+        if mtls:
+            ctls |= {
+                "connect_certificate": f"{certs}/{rid}.pem",
+                "connect_private_key": f"{certs}/{rid}-key.pem",
+            }
+        conf = client_config(connect, rid, f"<password of {rid} in {users_file}>", ctls)
+        (out / f"zenoh-{rid}.json5").write_text(json.dumps(conf, indent=2))
+    typer.echo(f"wrote {out}/zenoh-router.json5 and zenoh-<id>.json5 for {', '.join(ids)}")
