@@ -200,3 +200,25 @@ def test_keys_are_under_the_swarm_and_names_are_checked():
     for bad in ("", "a/b", "x*", "r 1", "a" * 33):
         with pytest.raises(ConfigError):
             k.robot(bad)
+
+
+# --- golden vectors ------------------------------------------------------------------------
+
+
+def test_golden_messages_decode_and_the_encoder_reproduces_them():
+    import json
+    from pathlib import Path
+
+    from protocols.golden.make_golden import golden_messages
+
+    golden = json.loads(
+        (Path(__file__).resolve().parents[1] / "protocols/golden/messages_v1.json").read_text()
+    )
+    msgs = dict(golden_messages())
+    assert set(golden) == set(msgs) == {m.TYPE for m in msgs.values()}
+    for name, g in golden.items():
+        env, msg = decode(bytes.fromhex(g["hex"]))
+        assert (env.type, env.sender, env.seq, env.stamp_s) == (name, "r1", 7, 12.5)
+        body = {k: (v.hex() if isinstance(v, bytes) else v) for k, v in msg.body().items()}
+        assert json.loads(json.dumps(body)) == g["body"]
+        assert encode(msgs[name], "r1", 7, 12.5).hex() == g["hex"]

@@ -40,7 +40,53 @@ def describe_polygons(polys) -> list:
     return [[{"xy": units(r.xy), "types": r.types.tolist()} for r in p.rings()] for p in polys]
 
 
+def golden_messages() -> list[tuple[str, object]]:
+    """One message of every type (sender "r1", seq 7, stamp 12.5 s)."""
+    from protocols.messages import (
+        Assignment,
+        AssignmentKind,
+        Clock,
+        CmdVel,
+        CoordinatorStatus,
+        MapChunk,
+        MapKind,
+        MissionState,
+        Odometry,
+        Pose,
+        RobotState,
+        RobotStatus,
+        Scan,
+        Truth,
+    )
+
+    return [
+        ("scan", Scan(-2.25, 0.5, 0.1, 30.0, np.array([1.0, 2.5, np.inf], dtype=np.float32))),
+        ("odom", Odometry(1.5, -2.0, 0.25, 0.5, -0.125)),
+        ("cmd_vel", CmdVel(0.25, 0.5, 41)),
+        ("pose", Pose(3.0, 4.0, -1.0, 9, "r2")),
+        ("robot-status", RobotStatus(RobotState.NAVIGATING, 4, "", 12, 9, 4096, 3.5)),
+        (
+            "assignment",
+            Assignment(AssignmentKind.EXPLORE, 5, (1.0, 2.0), ((0.0, 0.0), (1.0, 0.0)), 4.5, 11),
+        ),
+        (
+            "coordinator-status",
+            CoordinatorStatus(MissionState.EXPLORING, ("r1", "r2"), 3, 11, 42.0, 12.5, 1000),
+        ),
+        ("clock", Clock(12.5, 9.75)),
+        ("truth", Truth({"r1": (1.0, 2.0, 0.5)}, 0, 0)),
+        ("map-chunk", MapChunk(MapKind.DELTA, 3, 4, 1, 0, 1, 3, b"abc")),
+    ]
+
+
 def main() -> None:
+    from protocols.messages import encode
+
+    out = {}
+    for name, msg in golden_messages():
+        body = {k: (v.hex() if isinstance(v, bytes) else v) for k, v in msg.body().items()}
+        out[name] = {"hex": encode(msg, "r1", 7, 12.5).hex(), "body": body}
+    (HERE / "messages_v1.json").write_text(json.dumps(out, indent=1))
     a, b = golden_maps()
     (HERE / "map_v1.bin").write_bytes(encode_map(b))
     (HERE / "map_v1.json").write_text(
