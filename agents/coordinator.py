@@ -372,8 +372,12 @@ class Coordinator:
             if a is None or a.kind != AssignmentKind.EXPLORE or a.target not in ids:
                 continue
             if r.reached_t is not None and self.now - r.reached_t >= REACHED_GRACE_S:
+                # the robot stood there and looked: looking again will not close it
                 r.reached_t = None
-                self._failed(r, a.target, "reached, frontier still open")
+                t = self.targets.get(a.target)
+                r.assignment = None
+                if t is not None:
+                    self._blacklist(t, f"reached by {r.id}, frontier still open")
                 continue
             c = costs[k, ids.index(a.target)]
             if c < r.best_cost - PROGRESS_M:

@@ -40,7 +40,7 @@ class ControlParams:
     radius_m: float = 0.2
     max_v_mps: float = 0.5
     max_w_radps: float = 1.5
-    lookahead_m: float = 0.6  # carrot distance along the path
+    lookahead_m: float = 1.0  # carrot distance along the path (about 2 s at full speed)
     goal_tolerance_m: float = 0.25
     safety_margin_m: float = 0.03  # arcs keep radius + this from every scan point (3 sigma)
     dynamic_margin_m: float = 0.2  # ... and this much more from what the map does not explain

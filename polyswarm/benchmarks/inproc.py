@@ -37,7 +37,10 @@ def explore_in_process(
     cfg: Config | None = None,
     on_keyframe: KeyframeHook | None = None,
     stop_coverage: float = 1.01,
+    on_step: Callable[[object, list, object], None] | None = None,
 ) -> InProcessRun:
+    """``on_step(sim, agents, coordinator)`` is called after every simulation step with
+    scans (for instrumentation)."""
     import shapely
 
     from agents.coordinator import Coordinator
@@ -85,6 +88,8 @@ def explore_in_process(
                     coord.on_status(a.id, sim.time, out.status)
             if not events:
                 continue
+            if on_step is not None:
+                on_step(sim, agents, coord)
             merged = coord.flush() if coord.flush_due() else None
             if coord.due():
                 o = coord.cycle()

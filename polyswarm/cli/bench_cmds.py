@@ -378,3 +378,43 @@ def bench_bandwidth(
         )
     Console().print(t)
     console.print(f"CSV files and plots in {out}")
+
+
+@bench_app.command("cells")
+def bench_cells(
+    as_json: bool = JSON_OPT,
+    sizes: str = typer.Option("1,2,3,4", help="Cell sizes to compare, metres."),
+    log: str = typer.Option("freiburg-101-corrected.log.gz", help="Log in ../shared/data/logs."),
+) -> None:
+    """Merge time against delta bytes for several cell sizes (PolySLAM over a log)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from polyswarm.benchmarks import cells
+    from polyswarm.data import shared_data_dir
+
+    with Console(stderr=True).status("PolySLAM per cell size"):
+        res = cells.run(shared_data_dir() / "logs" / log, [float(s) for s in sizes.split(",")])
+    if as_json:
+        typer.echo(json.dumps(res, indent=2))
+        return
+    t = Table(title=f"Cell size on {res['log']}")
+    for col in (
+        "cell m",
+        "merge p50 ms",
+        "merge p95 ms",
+        "delta bytes",
+        "cells/delta",
+        "map bytes",
+    ):
+        t.add_column(col, justify="right")
+    for m in res["sizes"].values():
+        t.add_row(
+            f"{m['cell_size_m']:g}",
+            f"{m['merge_p50_ms']:.1f}",
+            f"{m['merge_p95_ms']:.1f}",
+            f"{m['delta_bytes']:,}",
+            f"{m['cells_per_delta_mean']:.1f}",
+            f"{m['map_bytes']:,}",
+        )
+    Console().print(t)
