@@ -10,7 +10,7 @@ a robot reached or failed its target, joined or left):
   3. assignment by strategy (hungarian / greedy / nearest) with hysteresis;
   4. failures: unreachable, stuck, or no progress for a timeout count against a
      target; after ``blacklist_after_failures`` it is blacklisted. A target reached
-     whose frontier is still there is blacklisted at once (it cannot be resolved);
+     whose frontier is still there counts as a failure;
   5. mission end: no reachable target for ``end_confirm_s`` -> robots return to their
      start poses -> done.
 Robot map deltas are applied to that robot's copy of its map as they arrive (a gap
@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agents import persist
 from polyswarm.config import Config
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.explore import Reach, Strategy, Target, assign, frontier_targets
@@ -93,7 +94,9 @@ class Coordinator:
         self.merged = GridPolyMap(cfg.map.cell_size_m)
         self.graph = NavGraph(self.radius, cfg.map.cell_size_m)
         self.targets: dict[int, Target] = {}
-        self._next_id = 0
+        # target ids differ from those of an earlier run of the coordinator (a restart):
+        # robots must not take a new target for the one they already reached
+        self._next_id = int(time.time() * 10) % 1_000_000_000
         self.failures: dict[int, int] = {}
         self.blacklist: list[np.ndarray] = []
         self.state = MissionState.STARTING
@@ -115,6 +118,17 @@ class Coordinator:
             log.warning("robot %s is not in the config: its start pose is unknown", rid)
             info = self.robots[rid] = RobotInfo(rid, np.zeros(3))
         return info
+
+    def restore(self, merged: GridPolyMap | None, robot_maps: dict[str, GridPolyMap]) -> None:
+        """Start from persisted state (a restarted coordinator): the merged map and what
+        each robot had shared; the robots' queryables fill in anything newer."""
+        if merged is not None:
+            if abs(merged.cell_size - self.merged.cell_size) > 1e-9:
+                raise MapError("persisted merged map has another cell size than the config")
+            self.merged = merged
+            self.graph = NavGraph.build(merged, self.radius)
+        for rid, pmap in robot_maps.items():
+            self.robot(rid).map = pmap
 
     def on_alive(self, rid: str, alive: bool) -> None:
         info = self.robot(rid)
@@ -269,7 +283,9 @@ class Coordinator:
                     # 4. no progress towards a target for too long counts as a failure
                     self._watch_progress(live, ids, costs)
             if self.state == MissionState.RETURNING and all(
-                r.status is not None and r.status.state in (RobotState.HOME, RobotState.UNREACHABLE)
+                # home, or unable to get there (the exploration itself is complete)
+                r.status is not None
+                and r.status.state in (RobotState.HOME, RobotState.UNREACHABLE, RobotState.STUCK)
                 for r in live
                 if r.assignment is not None and r.assignment.kind == AssignmentKind.HOME
             ):
@@ -372,12 +388,10 @@ class Coordinator:
             if a is None or a.kind != AssignmentKind.EXPLORE or a.target not in ids:
                 continue
             if r.reached_t is not None and self.now - r.reached_t >= REACHED_GRACE_S:
-                # the robot stood there and looked: looking again will not close it
+                # the robot stood there and looked; another look (from another goal, as
+                # the map has grown meanwhile) may still close it: a failure, not a verdict
                 r.reached_t = None
-                t = self.targets.get(a.target)
-                r.assignment = None
-                if t is not None:
-                    self._blacklist(t, f"reached by {r.id}, frontier still open")
+                self._failed(r, a.target, "reached, frontier still open")
                 continue
             c = costs[k, ids.index(a.target)]
             if c < r.best_cost - PROGRESS_M:
@@ -441,6 +455,19 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
     keys = SwarmKeys(cfg.comms.swarm)
     robots = {r.id: tuple(r.start) for r in cfg.robots}
     coord = Coordinator(cfg, robots)
+    state_dir = cfg.persist.dir
+    saved_t = -math.inf
+    if state_dir:
+        merged, robot_maps = persist.load_coordinator(state_dir)
+        coord.restore(merged, robot_maps)
+        if merged is not None:
+            log.info(
+                "restored the merged map (version %d, %.1f m2) and %d robot maps from %s",
+                merged.version,
+                merged.explored_area(),
+                len(robot_maps),
+                state_dir,
+            )
     with open_session(session_spec) as session:
         bus = Bus(session, "coordinator")
         try:
@@ -496,6 +523,9 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 if coord.due():
                     out = coord.cycle()
                     _publish_delta(bus, keys, coord, out.merged_delta)
+                    if state_dir and time.monotonic() - saved_t >= persist.COORDINATOR_PERIOD_S:
+                        saved_t = time.monotonic()
+                        _save(coord, state_dir)
                     for rid, a in out.assignments.items():
                         coord.bytes_sent += bus.publish(
                             keys.assignment(rid), a, coord.now, reliable=True
@@ -506,7 +536,18 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         )
         finally:
             bus.close()
+            if state_dir:
+                _save(coord, state_dir)
     return coord
+
+
+def _save(coord: Coordinator, state_dir: str) -> None:
+    try:
+        persist.save_coordinator(
+            state_dir, coord.merged, {r.id: r.map for r in coord.robots.values()}
+        )
+    except OSError as e:  # a full disk must not stop the mission
+        log.error("could not save the coordinator's state in %s: %s", state_dir, e)
 
 
 def _publish_delta(bus, keys: SwarmKeys, coord: Coordinator, delta: MapDelta | None) -> None:

@@ -105,6 +105,7 @@ def router_config(
     }
     if tls:
         transport["link"] = {"tls": tls}
+    transport["link"] = transport.get("link", {}) | {"tx": {"lease": 3000, "keep_alive": 4}}
     return {
         "mode": "router",
         "listen": {"endpoints": [listen]},

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agents import persist
 from polyswarm.config import Config
 from polyswarm.control import ControlParams, Follow, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PlanningError, PolyswarmError
@@ -146,6 +147,11 @@ class RobotAgent:
             self.stats.distance_m += float(np.hypot(*(pose[:2] - self._last_odom_xy)))
         self._last_odom_xy = pose[:2]
 
+    def resume(self, pmap: GridPolyMap, pose) -> None:
+        """Continue from a persisted map and pose (the agent was restarted)."""
+        self.slam.resume(pmap, pose)
+        self.pose = np.array(pose, dtype=float)
+
     @property
     def latest_odom_s(self) -> float:
         return self._odom_t[-1] if self._odom_t else -math.inf
@@ -170,6 +176,7 @@ class RobotAgent:
             self.assignment is not None
             and a.target == self.assignment.target
             and a.kind == self.assignment.kind
+            and a.goal == self.assignment.goal
         )
         self.assignment = a
         if same:
@@ -444,6 +451,19 @@ def run_agent(
     keys = SwarmKeys(cfg.comms.swarm)
     me = keys.robot(robot_id)
     agent = RobotAgent(robot_id, cfg, start_pose)
+    state_dir = cfg.persist.dir
+    if state_dir:
+        saved = persist.load_agent(state_dir, robot_id)
+        if saved is not None:
+            agent.resume(*saved)
+            log.info(
+                "%s: resumed from %s (map version %d, %.1f m2, pose %s)",
+                robot_id,
+                state_dir,
+                saved[0].version,
+                saved[0].explored_area(),
+                np.round(saved[1], 3).tolist(),
+            )
     t_end = time.monotonic() + duration_s if duration_s > 0 else math.inf
     with open_session(session_spec) as session:
         bus = Bus(session, robot_id)
@@ -479,12 +499,12 @@ def run_agent(
                         if isinstance(msg, Odometry):
                             agent.on_odom(item.stamp_s, msg)
                             while waiting and waiting[0][1].stamp_s <= item.stamp_s:
-                                _process_scan(bus, me, agent, waiting.pop(0)[1], sink)
+                                _process_scan(bus, me, agent, waiting.pop(0)[1], sink, state_dir)
                         elif isinstance(msg, Scan):
                             # odometry and scans travel on separate keys: a scan waits
                             # (briefly) for the odometry of its time
                             if agent.latest_odom_s >= item.stamp_s:
-                                _process_scan(bus, me, agent, item, sink)
+                                _process_scan(bus, me, agent, item, sink, state_dir)
                             else:
                                 waiting.append((time.monotonic(), item))
                         elif isinstance(msg, Pose):
@@ -510,7 +530,7 @@ def run_agent(
                     except PolyswarmError as e:
                         log.warning("%s: %s", robot_id, e)
                 while waiting and time.monotonic() - waiting[0][0] > SCAN_WAIT_S:
-                    _process_scan(bus, me, agent, waiting.pop(0)[1], sink)
+                    _process_scan(bus, me, agent, waiting.pop(0)[1], sink, state_dir)
                 if need_merged:
                     got = bus.fetch_map(keys.merged_map, timeout_s=2.0)
                     if got is not None:
@@ -523,15 +543,20 @@ def run_agent(
             if attach is not None and detach is not None:
                 detach()
             bus.close()
+            if state_dir:
+                persist.save_agent(state_dir, robot_id, agent.slam.map, agent.pose)
     return agent
 
 
-def _process_scan(bus, me, agent: RobotAgent, item, sink) -> None:
+def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -> None:
     try:
         out = agent.on_scan(item.stamp_s, scan_from_message(item.msg, item.stamp_s))
     except PolyswarmError as e:
         log.warning("%s: scan %d refused: %s", agent.id, item.seq, e)
         return
+    if out.delta is not None and state_dir:
+        # on disk before anyone has seen it: a restart never reuses a published version
+        persist.save_agent(state_dir, agent.id, agent.slam.map, agent.pose)
     _send(bus, me, agent, out, item.stamp_s, item.seq, sink)
 
 

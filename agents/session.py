@@ -44,6 +44,7 @@ from protocols.messages import (
 log = logging.getLogger(__name__)
 
 QUEUE_LIMIT = 10_000  # messages waiting for the process thread; older telemetry is dropped
+LEASE_MS = 3000  # liveliness lease: a silent process is declared gone after this
 CONNECT_RETRY_S = 0.25  # a client retries its router this often while it is not up
 LOG_EVERY_S = 5.0  # malformed-message warnings at most this often per key
 
@@ -84,6 +85,9 @@ def session_config(spec: SessionSpec) -> zenoh.Config:
     else:
         conf = zenoh.Config()
         conf.insert_json5("scouting/multicast/enabled", "false")
+        # a peer that stops answering (killed, frozen, unplugged) is gone after the lease
+        conf.insert_json5("transport/link/tx/lease", str(LEASE_MS))
+        conf.insert_json5("transport/link/tx/keep_alive", "4")
     try:
         conf.insert_json5("mode", json.dumps(spec.mode))
         if spec.listen:
@@ -356,6 +360,7 @@ def stop_on_signals() -> threading.Event:
     stop = threading.Event()
 
     def handler(signum, frame) -> None:
+        log.info("%s received: stopping", signal.Signals(signum).name)
         stop.set()
 
     signal.signal(signal.SIGINT, handler)

@@ -211,6 +211,13 @@ class AgentIoConfig:
 
 
 @dataclass(frozen=True)
+class PersistConfig:
+    """Where agents and the coordinator keep their maps across restarts ("": nowhere)."""
+
+    dir: str = ""
+
+
+@dataclass(frozen=True)
 class Config:
     map: MapConfig = field(default_factory=MapConfig)
     sim: SimConfig = field(default_factory=SimConfig)
@@ -219,6 +226,7 @@ class Config:
     explore: ExploreConfig = field(default_factory=ExploreConfig)
     comms: CommsConfig = field(default_factory=CommsConfig)
     agent: AgentIoConfig = field(default_factory=AgentIoConfig)
+    persist: PersistConfig = field(default_factory=PersistConfig)
     robots: tuple[RobotEntry, ...] = ()  # [[robots]] tables: ids and start poses
 
 

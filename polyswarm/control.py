@@ -25,6 +25,10 @@ from polyswarm.se2 import wrap
 
 CREEP_MARGIN_M = 0.01  # blocked at the normal margin: creep past with this much room
 CREEP_MPS = 0.1
+LOOKAHEAD_STEPS = (1.0, 0.7, 0.45, 0.25)  # fractions of the lookahead tried for the carrot
+ESCAPE_MPS = 0.05  # pressed against an obstacle ahead: back off this slowly...
+ESCAPE_TRIGGER_M = 0.02  # ... when something is this much inside the safety margin
+ESCAPE_CHECK_M = 0.15  # ... and the way back is clear for this far
 
 
 class Follow(StrEnum):
@@ -104,19 +108,25 @@ class PathFollower:
         pose = np.asarray(pose, dtype=float)
         if np.hypot(*(self.path[-1] - pose[:2])) <= self.p.goal_tolerance_m:
             return Command(0.0, 0.0, Follow.ARRIVED)
-        carrot = self._carrot(pose[:2])
+        obs = np.asarray(obstacles_xy, dtype=float).reshape(-1, 2)
         c, s = math.cos(pose[2]), math.sin(pose[2])
-        d = carrot - pose[:2]
-        local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
+        # the farthest carrot (up to the lookahead) the robot can drive straight to: a
+        # carrot beyond a door jamb would pull the robot into the jamb
+        local = None
+        for frac in LOOKAHEAD_STEPS:
+            carrot = self._carrot(pose[:2], frac * self.p.lookahead_m)
+            d = carrot - pose[:2]
+            local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
+            if _segment_clearance(local, obs) >= self.p.radius_m + self.p.safety_margin_m:
+                break
         bearing = math.atan2(local[1], local[0])
         if abs(bearing) > self.p.turn_in_place_rad:
             w = math.copysign(self.p.max_w_radps, bearing) * min(1.0, abs(bearing))
             return Command(0.0, w, Follow.TURNING)
-        obs = np.asarray(obstacles_xy, dtype=float).reshape(-1, 2)
         extra = np.zeros(len(obs)) if moving is None else np.where(moving, 1.0, 0.0)
         return self._window(local, bearing, obs, extra)
 
-    def _carrot(self, p: np.ndarray) -> np.ndarray:
+    def _carrot(self, p: np.ndarray, lookahead_m: float) -> np.ndarray:
         path = self.path
         if len(path) == 1:
             return path[0]
@@ -131,7 +141,7 @@ class PathFollower:
         self._progress = k
         # walk lookahead metres along the path from the projection
         q = a[k] + t[k] * ab[k]
-        left = self.p.lookahead_m
+        left = lookahead_m
         pts = np.vstack([q, path[k + 1 :]])
         for u, v in itertools.pairwise(pts):
             seg = float(np.hypot(*(v - u)))
@@ -177,8 +187,35 @@ class PathFollower:
                 k = int(np.argmax(np.where(ok, score, -np.inf)))
                 return Command(float(self._v[k]), float(self._w[k]), Follow.DRIVING)
         # nothing moving forward is safe: turn towards the carrot (a round robot turning
-        # in place touches nothing), else wait for the way to clear
+        # in place touches nothing); pressed against something in front, back away from
+        # it; else wait for the way to clear
         if abs(bearing) > 0.15:
             w = math.copysign(min(p.max_w_radps, 2.0 * abs(bearing)), bearing)
             return Command(0.0, w, Follow.BLOCKED)
+        if self._can_back_off(obstacles):
+            return Command(-ESCAPE_MPS, 0.0, Follow.BLOCKED)
         return Command(0.0, 0.0, Follow.BLOCKED)
+
+    def _can_back_off(self, obstacles: np.ndarray) -> bool:
+        """Something is within the safety margin ahead and the way back is clear."""
+        p = self.p
+        if not len(obstacles):
+            return False
+        d = np.hypot(obstacles[:, 0], obstacles[:, 1])
+        near_front = (d < p.radius_m + p.safety_margin_m + ESCAPE_TRIGGER_M) & (obstacles[:, 0] > 0)
+        if not near_front.any():
+            return False
+        # the disc swept backwards by ESCAPE_CHECK_M must keep the creep margin
+        behind = obstacles[:, 0] < 0
+        lateral = np.abs(obstacles[:, 1]) < p.radius_m + CREEP_MARGIN_M
+        reach = obstacles[:, 0] > -(p.radius_m + CREEP_MARGIN_M + ESCAPE_CHECK_M)
+        return not (behind & lateral & reach).any()
+
+
+def _segment_clearance(end: np.ndarray, points: np.ndarray) -> float:
+    """Smallest distance of ``points`` to the segment from the origin to ``end``."""
+    if not len(points):
+        return math.inf
+    L2 = float(end @ end)
+    t = np.clip(points @ end / L2, 0.0, 1.0) if L2 > 0 else np.zeros(len(points))
+    return float(np.hypot(*(points - t[:, None] * end[None, :]).T).min())

@@ -36,6 +36,8 @@ GOAL_OFFSETS_M = (0.6, 1.0, 1.5, 0.35)  # goal candidates this far inside the fr
 GOAL_ALONG = (0.5, 0.25, 0.75)  # ... at these fractions along the frontier
 FALLBACK_RADIUS_M = 4.0  # ... else the nearest graph node this close that sees the frontier
 UTILITY_CAP_M = 6.0  # a frontier longer than this is worth no more
+SEAM_M = 0.1  # a frontier this close to walls all along is a seam in a wall, not a target
+SEAM_SAMPLE_M = 0.1  # ... tested at points this far apart
 UTILITY_WEIGHT = 1.0  # metres of path a metre of frontier is worth
 UNREACHABLE = math.inf
 
@@ -77,7 +79,7 @@ def frontier_targets(
     Frontiers with no goal, or near a blacklisted point, are not targets.
     ``separation_m`` > 0 keeps one target per neighbourhood (the longest frontier)."""
     usable = graph.has_node if reach is None else reach.reaches
-    segs = extract_frontiers(pmap, min_length_m, max_length_m)
+    segs = _without_seams(pmap, extract_frontiers(pmap, min_length_m, max_length_m))
     if not segs:
         return []
     cands, owner = [], []
@@ -133,6 +135,22 @@ def frontier_targets(
             if all(np.hypot(*(t.goal - o.goal)) >= separation_m for o in kept):
                 kept.append(t)
         out = kept
+    return out
+
+
+def _without_seams(pmap: GridPolyMap, segs: list[FrontierSegment]) -> list[FrontierSegment]:
+    """Drop frontiers that run along a mapped wall, within ``SEAM_M`` of its obstacle
+    vectors all the way: the space behind them is too thin for a keyframe to add (merging
+    ignores growth thinner than slam.min_growth_m), so looking at them closes nothing."""
+    out = []
+    for seg in segs:
+        n = max(2, math.ceil(seg.length_m / SEAM_SAMPLE_M) + 1)
+        pts = np.array([point_along(seg.points, d) for d in np.linspace(0, seg.length_m, n)])
+        lo, hi = pts.min(axis=0) - SEAM_M, pts.max(axis=0) + SEAM_M
+        cells = pmap.cells_within(*(0.5 * (lo + hi)), 0.5 * float(np.hypot(*(hi - lo))) + 0.1)
+        st, en, _ = pmap.vectors([VectorType.OBSTACLE], cells)
+        if len(st) == 0 or clear_of(pts, st, en, SEAM_M).any():
+            out.append(seg)
     return out
 
 

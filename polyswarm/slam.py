@@ -74,6 +74,19 @@ class PolySlam:
         self.rejected_keyframes = 0
         self._keyframe_requested = False
 
+    def resume(self, pmap: GridPolyMap, pose) -> None:
+        """Continue on a persisted map from the last known pose (an agent restarted where
+        its robot stands): the next scan is a keyframe aligned against that map."""
+        if abs(pmap.cell_size - self.map.cell_size) > 1e-9:
+            raise PolyswarmError(
+                f"persisted map has {pmap.cell_size} m cells, the config {self.map.cell_size} m"
+            )
+        self.map = pmap
+        self.pose = np.array(pose, dtype=float)
+        self._kf_pose = self._kf_odom = None
+        self.selector.last = None
+        self._keyframe_requested = True
+
     def request_keyframe(self) -> None:
         """Make the next scan a keyframe (a robot that stopped to look at something)."""
         self._keyframe_requested = True

@@ -139,6 +139,9 @@ def coordinator_cmd(
     ),
     zenoh_config: Path | None = typer.Option(None, help=ZENOH_HELP),
     strategy: str | None = typer.Option(None, help="hungarian, greedy or nearest."),
+    connect: str | None = typer.Option(
+        None, help="Connect to this Zenoh router as a client instead of being the router."
+    ),
 ) -> None:
     """Run the coordinator (and the Zenoh router): merged map, frontiers, assignment."""
     from agents.coordinator import run_coordinator
@@ -148,9 +151,11 @@ def coordinator_cmd(
     cfg = load_config(config)
     if strategy is not None:
         cfg = with_overrides(cfg, {"explore": {"strategy": strategy}})
-    spec = SessionSpec.router(
-        listen or cfg.comms.endpoint, str(zenoh_config or cfg.comms.zenoh_config or "")
-    )
+    zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
+    if connect:
+        spec = SessionSpec.client(connect, zconf)
+    else:
+        spec = SessionSpec.router(listen or cfg.comms.endpoint, zconf)
     coord = run_coordinator(cfg, spec)
     typer.echo(
         f"coordinator: mission {coord.state}, merged map {coord.merged.explored_area():.1f} m2, "
@@ -182,6 +187,11 @@ def launch_cmd(
     ),
     out: Path | None = typer.Option(None, help="Run folder (default runs/<timestamp>/)."),
     config: Path | None = CONFIG_OPT,
+    fault: str = typer.Option(
+        "",
+        help="Inject faults: action:process@simulated-seconds, comma separated; actions "
+        "kill, stop, cont, restart (e.g. kill:r2@20,restart:r2@30).",
+    ),
 ) -> None:
     """Explore a simulated world with N robots: coordinator, sim and agents as processes."""
     import threading
@@ -192,7 +202,7 @@ def launch_cmd(
 
     from polyswarm.config import load_config
     from polyswarm.explore import Strategy
-    from polyswarm.runners.launch import LaunchOptions, launch
+    from polyswarm.runners.launch import Fault, LaunchOptions, launch
 
     try:
         Strategy(strategy)
@@ -212,6 +222,7 @@ def launch_cmd(
         stop_coverage,
         out,
         load_config(config),
+        faults=Fault.parse_many(fault),
     )
     console = Console(stderr=True)
 
@@ -303,3 +314,22 @@ def fleet_config_cmd(
         conf = client_config(connect, rid, f"<password of {rid} in {users_file}>", ctls)
         (out / f"zenoh-{rid}.json5").write_text(json.dumps(conf, indent=2))
     typer.echo(f"wrote {out}/zenoh-router.json5 and zenoh-<id>.json5 for {', '.join(ids)}")
+
+
+@app.command("router")
+def router_cmd(
+    listen: str = typer.Option("tcp/127.0.0.1:7447", help="Endpoint to listen on."),
+    zenoh_config: Path | None = typer.Option(None, help=ZENOH_HELP),
+) -> None:
+    """Run a bare Zenoh router (no coordinator): the others connect to it as clients.
+
+    With its own router a fleet keeps talking while the coordinator restarts."""
+    import logging
+
+    from agents.session import SessionSpec, open_session, stop_on_signals
+
+    stop = stop_on_signals()
+    with open_session(SessionSpec.router(listen, str(zenoh_config or ""))):
+        logging.getLogger("polyswarm.router").info("router listening on %s", listen)
+        while not stop.wait(0.5):
+            pass

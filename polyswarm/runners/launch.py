@@ -24,6 +24,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +32,7 @@ import shapely
 
 from agents.session import Bus, SessionSpec, open_session
 from polyswarm.config import Config, RobotEntry, config_to_dict, save_config, with_overrides
-from polyswarm.errors import DecodeError, MapError, PolyswarmError
+from polyswarm.errors import ConfigError, DecodeError, MapError, PolyswarmError
 from polyswarm.polymap import GridPolyMap, MapDelta
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta, decode_map
@@ -52,6 +53,36 @@ COVERAGE_EVERY_S = 1.0  # simulated seconds between coverage samples
 START_TIMEOUT_S = 60.0  # wall seconds for all processes to come up
 
 
+class FaultAction(StrEnum):
+    KILL = "kill"  # SIGKILL: the process dies without a word
+    STOP = "stop"  # SIGSTOP: frozen (a hung process)
+    CONT = "cont"  # SIGCONT: wakes a frozen process
+    RESTART = "restart"  # start a killed process again, same arguments
+
+
+@dataclass(frozen=True)
+class Fault:
+    action: FaultAction
+    target: str  # "coordinator", "sim" or a robot id
+    at_s: float  # simulated seconds
+
+    @classmethod
+    def parse_many(cls, text: str) -> tuple[Fault, ...]:
+        """``kill:r2@20,restart:r2@30`` (action:process@simulated seconds)."""
+        out = []
+        for item in filter(None, (t.strip() for t in text.split(","))):
+            try:
+                head, at = item.split("@")
+                action, target = head.split(":")
+                out.append(cls(FaultAction(action), target, float(at)))
+            except ValueError:
+                raise ConfigError(
+                    f"fault {item!r}: expected action:process@seconds with action one of "
+                    f"{', '.join(FaultAction)} (e.g. kill:r2@20)"
+                ) from None
+        return tuple(sorted(out, key=lambda f: f.at_s))
+
+
 @dataclass(frozen=True)
 class LaunchOptions:
     world: str = "office"
@@ -66,6 +97,7 @@ class LaunchOptions:
     out: Path | None = None
     config: Config = field(default_factory=Config)
     verbose: bool = False
+    faults: tuple[Fault, ...] = ()  # fault injection (tests of reliability)
 
 
 @dataclass
@@ -230,21 +262,46 @@ class Child:
     name: str
     proc: subprocess.Popen
     log_path: Path
+    args: list[str] = field(default_factory=list)
+    verbose: bool = False
 
 
 def _spawn(name: str, args: list[str], logs: Path, verbose: bool) -> Child:
     log_path = logs / f"{name}.log"
-    f = open(log_path, "w")  # noqa: SIM115 - kept open for the child's lifetime
+    f = open(log_path, "a")  # noqa: SIM115 - kept open for the child's lifetime
     cmd = [sys.executable, "-m", "polyswarm"] + (["-vv"] if verbose else ["-v"]) + args
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
     f.close()
-    return Child(name, proc, log_path)
+    return Child(name, proc, log_path, args, verbose)
+
+
+def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
+    """Apply one fault to the named child (a restart replaces it in ``children``)."""
+    k = next((i for i, c in enumerate(children) if c.name == fault.target), None)
+    if k is None:
+        raise ConfigError(f"fault {fault}: no process named {fault.target!r}")
+    c = children[k]
+    log.warning("fault injection at %.1f s: %s %s", fault.at_s, fault.action, c.name)
+    if fault.action == FaultAction.RESTART:
+        if c.proc.poll() is None:
+            c.proc.kill()
+            c.proc.wait()
+        children[k] = _spawn(c.name, c.args, logs, c.verbose)
+    else:
+        sig = {
+            FaultAction.KILL: signal.SIGKILL,
+            FaultAction.STOP: signal.SIGSTOP,
+            FaultAction.CONT: signal.SIGCONT,
+        }[fault.action]
+        if c.proc.poll() is None:
+            c.proc.send_signal(sig)
 
 
 def _stop_children(children: list[Child]) -> dict[str, int | None]:
     for c in children:
         if c.proc.poll() is None:
+            c.proc.send_signal(signal.SIGCONT)  # a frozen child could not stop
             c.proc.send_signal(signal.SIGTERM)
     deadline = time.monotonic() + SHUTDOWN_S
     for c in children:
@@ -280,6 +337,8 @@ def prepare(opts: LaunchOptions):
     cfg = _with_robots(cfg, robots)
     out = opts.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
+    if not cfg.persist.dir:  # agents and coordinator keep their maps in the run folder
+        cfg = with_overrides(cfg, {"persist": {"dir": str((out / "state").resolve())}})
     (out / "logs").mkdir(exist_ok=True)
     save_config(cfg, out / "config.toml")
     return world, cfg, out
@@ -307,8 +366,15 @@ def launch(
     t0 = time.monotonic()
     error: str | None = None
     try:
+        # a router of its own: the others keep talking while the coordinator restarts
+        children.append(_spawn("router", ["router", "--listen", cfg.comms.endpoint], logs, False))
         children.append(
-            _spawn("coordinator", ["coordinator", "--config", conf], logs, opts.verbose)
+            _spawn(
+                "coordinator",
+                ["coordinator", "--config", conf, "--connect", cfg.comms.endpoint],
+                logs,
+                opts.verbose,
+            )
         )
         sim_args = [
             "sim",
@@ -342,7 +408,12 @@ def launch(
     finally:
         codes = _stop_children(children)
     wall = time.monotonic() - t0
-    crashed = {k: v for k, v in codes.items() if v not in (0, -signal.SIGTERM, 130)}
+    injected = {f.target for f in opts.faults if f.action == FaultAction.KILL}
+    crashed = {
+        k: v
+        for k, v in codes.items()
+        if v not in (0, -signal.SIGTERM, 130) and not (k in injected and v == -signal.SIGKILL)
+    }
     m = obs.metrics(wall, opts)
     m["exit_codes"] = codes
     m["crashed_processes"] = sorted(crashed)
@@ -353,6 +424,9 @@ def launch(
 
 
 def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0) -> str:
+    pending = list(opts.faults)
+    faulted: set[str] = set()  # killed by fault injection (not a reason to stop)
+    logs = children[0].log_path.parent
     last_progress = 0.0
     up = False
     while True:
@@ -377,7 +451,14 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0) -> str:
             progress(obs, now - t0)
         if stop.is_set():
             return "interrupted"
-        dead = [c.name for c in children if c.proc.poll() is not None]
+        while pending and obs.sim_t >= pending[0].at_s:
+            fault = pending.pop(0)
+            _inject(fault, children, logs)
+            if fault.action == FaultAction.KILL:
+                faulted.add(fault.target)
+            elif fault.action == FaultAction.RESTART:
+                faulted.discard(fault.target)
+        dead = [c.name for c in children if c.proc.poll() is not None and c.name not in faulted]
         if dead:
             return f"process exited: {', '.join(dead)}"
         if obs.mission == MissionState.DONE:

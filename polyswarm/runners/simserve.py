@@ -79,6 +79,10 @@ def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration
                 who = keys.alive_name(item.key)
                 if who is not None:
                     (alive.add if change else alive.discard)(who)
+                    if who[0] == "agent" and who[1] in sent:
+                        # a (re)started or lost agent owes no acknowledgements
+                        sent[who[1]] = []
+                        acked[who[1]] = -1
                 continue
             rid = keys.robot_of(item.key)
             if rid not in index:
