@@ -56,6 +56,7 @@ RESEND_S = 5.0  # assignments are repeated this often (a lost message heals)
 PROGRESS_M = 0.5  # progress towards a target: its path cost shrank by this much
 EXCLUDE_S = 30.0  # a robot that failed a target is not sent there again for this long
 RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
+GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
 MERGE_PERIOD_S = 0.5  # robots' changed cells are merged at least this often (batched)
 
@@ -76,6 +77,7 @@ class RobotInfo:
     reached_t: float | None = None  # when the robot reported its target reached
     behind_since: float | None = None  # the robot's map version is ahead of ours since
     announced: int = 0  # the robot's map version, as its poses tell
+    home_failed: bool = False  # could not drive back to its start (the mission still ends)
 
 
 @dataclass
@@ -172,7 +174,11 @@ class Coordinator:
         if old is not None and old.state == status.state and old.target == status.target:
             return
         if status.state in (RobotState.UNREACHABLE, RobotState.STUCK):
-            self._failed(info, a.target, str(status.state))
+            if a.kind == AssignmentKind.HOME:
+                info.home_failed = True  # exploring is over; a robot short of home is fine
+                log.info("robot %s cannot get home (%s)", rid, status.state)
+            else:
+                self._failed(info, a.target, str(status.state))
         elif status.state == RobotState.REACHED and a.kind == AssignmentKind.EXPLORE:
             # judged at the next cycles: a frontier still open after the robot stood
             # there and looked at it counts as a failure of that target
@@ -284,8 +290,7 @@ class Coordinator:
                     self._watch_progress(live, ids, costs)
             if self.state == MissionState.RETURNING and all(
                 # home, or unable to get there (the exploration itself is complete)
-                r.status is not None
-                and r.status.state in (RobotState.HOME, RobotState.UNREACHABLE, RobotState.STUCK)
+                r.home_failed or (r.status is not None and r.status.state == RobotState.HOME)
                 for r in live
                 if r.assignment is not None and r.assignment.kind == AssignmentKind.HOME
             ):
@@ -369,7 +374,23 @@ class Coordinator:
                 continue
             tid = ids[j]
             t = targets[tid]
-            if r.assignment is None or r.assignment.target != tid:
+            moved = (
+                r.assignment is not None
+                and r.assignment.target == tid
+                and np.hypot(*(np.array(r.assignment.goal) - t.goal)) > GOAL_MOVED_M
+            )
+            if moved:  # the frontier moved as the map grew: the robot follows it
+                r.reached_t = None
+                r.sent_t = -math.inf
+                r.assignment = Assignment(
+                    AssignmentKind.EXPLORE,
+                    tid,
+                    (float(t.goal[0]), float(t.goal[1])),
+                    tuple((float(x), float(y)) for x, y in t.frontier.points[:64]),
+                    float(costs[k, j]),
+                    self.merged.version,
+                )
+            elif r.assignment is None or r.assignment.target != tid:
                 r.best_cost, r.progress_t, r.reached_t = math.inf, self.now, None
                 r.sent_t = -math.inf
                 r.assignment = Assignment(
@@ -428,6 +449,7 @@ class Coordinator:
         self.state = MissionState.RETURNING
         log.info("no reachable frontier left: robots return to their start")
         for r in live:
+            r.home_failed = False
             r.assignment = Assignment(
                 AssignmentKind.HOME,
                 self._next_id,

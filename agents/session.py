@@ -20,7 +20,9 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import queue
+import random
 import signal
 import threading
 import time
@@ -137,10 +139,44 @@ class Received:
     payload: bytes | None = None  # a reassembled map or delta (for MapChunk streams)
 
 
+@dataclass(frozen=True)
+class LinkFaults:
+    """Faults injected on reception, for tests of reliability: each received sample is
+    dropped with ``drop``, delivered twice with ``dup``, or held back and delivered after
+    the next one with ``reorder`` (probabilities; liveliness is not affected)."""
+
+    drop: float = 0.0
+    dup: float = 0.0
+    reorder: float = 0.0
+    seed: int = 0
+
+    @classmethod
+    def parse(cls, text: str) -> LinkFaults | None:
+        """``drop=0.1,dup=0.05,reorder=0.05,seed=1`` (also the POLYSWARM_LINK_FAULTS
+        environment variable); empty: None."""
+        if not text.strip():
+            return None
+        vals: dict[str, float] = {}
+        for item in text.split(","):
+            key, _, v = item.partition("=")
+            if key.strip() not in ("drop", "dup", "reorder", "seed"):
+                raise CommsError(f"link faults: unknown key {key.strip()!r} in {text!r}")
+            try:
+                vals[key.strip()] = float(v)
+            except ValueError:
+                raise CommsError(f"link faults: {item!r} is not key=number") from None
+        seed = int(vals.pop("seed", 0))
+        if not all(0.0 <= p < 1.0 for p in vals.values()):
+            raise CommsError(f"link faults: probabilities must be in [0, 1): {text!r}")
+        return cls(seed=seed, **vals)
+
+
 class Bus:
     """Typed publish/subscribe on one session, handled on the caller's thread."""
 
-    def __init__(self, session: zenoh.Session, sender: str) -> None:
+    def __init__(
+        self, session: zenoh.Session, sender: str, faults: LinkFaults | None = None
+    ) -> None:
         self.session = session
         self.sender = sender
         self._queue: queue.Queue[Received] = queue.Queue(QUEUE_LIMIT)
@@ -153,6 +189,11 @@ class Bus:
         self._last_warning: dict[str, float] = {}
         self.bytes_sent: dict[str, int] = {}  # per key
         self.rejected = 0  # malformed messages received
+        if faults is None:
+            faults = LinkFaults.parse(os.environ.get("POLYSWARM_LINK_FAULTS", ""))
+        self.faults = faults
+        self._fault_rng = random.Random(faults.seed if faults else 0)
+        self.injected = {"drop": 0, "dup": 0, "reorder": 0}
 
     # -- sending --------------------------------------------------------------------------
 
@@ -237,10 +278,44 @@ class Bus:
 
     # -- receiving ------------------------------------------------------------------------
 
+    def _faulty(
+        self, sample: zenoh.Sample, handle: Callable[[zenoh.Sample], None], hold: list
+    ) -> None:
+        """Deliver ``sample`` through the injected faults (see ``LinkFaults``); ``hold``
+        is the subscription's own slot for a sample held back."""
+        f = self.faults
+        with self._lock:
+            r = self._fault_rng.random()
+            held = hold.pop() if hold else None
+            if r < f.drop:
+                self.injected["drop"] += 1
+                out = []
+            elif r < f.drop + f.dup:
+                self.injected["dup"] += 1
+                out = [sample, sample]
+            elif r < f.drop + f.dup + f.reorder and held is None:
+                self.injected["reorder"] += 1
+                hold.append(sample)
+                out = []
+            else:
+                out = [sample]
+            if held is not None:
+                out.append(held)  # the held-back sample arrives after a later one
+        for s in out:
+            handle(s)
+
     def subscribe(self, key: str, kind: type[Message]) -> None:
         """Queue every valid ``kind`` message on ``key`` (a key expression)."""
 
+        hold: list = []  # a sample held back by fault injection (reordering)
+
         def on_sample(sample: zenoh.Sample) -> None:
+            if self.faults is not None:
+                self._faulty(sample, handle, hold)
+            else:
+                handle(sample)
+
+        def handle(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
             try:
                 env, msg = decode(sample.payload.to_bytes(), kind)

@@ -35,6 +35,8 @@ from polyswarm.polymap import GridPolyMap, VectorType
 GOAL_OFFSETS_M = (0.6, 1.0, 1.5, 0.35)  # goal candidates this far inside the free side
 GOAL_ALONG = (0.5, 0.25, 0.75)  # ... at these fractions along the frontier
 FALLBACK_RADIUS_M = 4.0  # ... else the nearest graph node this close that sees the frontier
+FALLBACK_MIN_SIN = 0.5  # ... preferring views at least 30 degrees off the frontier's line
+FALLBACK_GRAZING_PENALTY_M = 10.0  # ... (a grazing view counts as this much farther)
 UTILITY_CAP_M = 6.0  # a frontier longer than this is worth no more
 SEAM_M = 0.1  # a frontier this close to walls all along is a seam in a wall, not a target
 SEAM_SAMPLE_M = 0.1  # ... tested at points this far apart
@@ -119,7 +121,7 @@ def frontier_targets(
         if goal is None:  # no room in front of it (a thin wedge seen through a door)
             if node_pts is None:
                 node_pts = _node_points(graph, usable)
-            goal = _nearest_view_point(pmap, node_pts, seg.midpoint)
+            goal = _nearest_view_point(pmap, node_pts, seg.midpoint, seg.end - seg.start)
         if goal is None:
             continue
         if len(black) and (
@@ -159,13 +161,24 @@ def _node_points(graph: NavGraph, usable) -> np.ndarray:
     return np.array(pts, dtype=float).reshape(-1, 2)
 
 
-def _nearest_view_point(pmap: GridPolyMap, nodes: np.ndarray, target: np.ndarray):
-    """The graph node point nearest to ``target`` (within ``FALLBACK_RADIUS_M``) that
-    sees it: the straight line between them crosses no obstacle vector."""
+def _nearest_view_point(
+    pmap: GridPolyMap, nodes: np.ndarray, target: np.ndarray, along: np.ndarray | None = None
+):
+    """A graph node point within ``FALLBACK_RADIUS_M`` of ``target`` that sees it (the
+    straight line between them crosses no obstacle vector): the nearest of those that
+    look at the frontier (direction ``along``) from the side rather than along it, as a
+    look along a frontier shows nothing behind it."""
     if len(nodes) == 0:
         return None
     d = np.hypot(*(nodes - target).T)
-    order = np.argsort(d)
+    score = d.copy()
+    if along is not None and np.hypot(*along) > 1e-9:
+        u = along / np.hypot(*along)
+        sin = np.abs(np.cross(np.broadcast_to(u, nodes.shape), nodes - target)) / np.maximum(
+            d, 1e-9
+        )
+        score = d + FALLBACK_GRAZING_PENALTY_M * (sin < FALLBACK_MIN_SIN)
+    order = np.argsort(score)
     order = order[d[order] <= FALLBACK_RADIUS_M]
     if len(order) == 0:
         return None

@@ -192,6 +192,11 @@ def launch_cmd(
         help="Inject faults: action:process@simulated-seconds, comma separated; actions "
         "kill, stop, cont, restart (e.g. kill:r2@20,restart:r2@30).",
     ),
+    link_faults: str = typer.Option(
+        "",
+        help="Lose, duplicate and reorder received messages at the coordinator and agents "
+        "(probabilities), e.g. drop=0.1,dup=0.05,reorder=0.05.",
+    ),
 ) -> None:
     """Explore a simulated world with N robots: coordinator, sim and agents as processes."""
     import threading
@@ -210,6 +215,9 @@ def launch_cmd(
         raise ConfigError(
             f"--strategy must be hungarian, greedy or nearest, not {strategy!r}"
         ) from None
+    from agents.session import LinkFaults
+
+    LinkFaults.parse(link_faults)  # a bad specification fails here, not in the children
     opts = LaunchOptions(
         world,
         robots,
@@ -223,6 +231,7 @@ def launch_cmd(
         out,
         load_config(config),
         faults=Fault.parse_many(fault),
+        link_faults=link_faults,
     )
     console = Console(stderr=True)
 

@@ -98,6 +98,7 @@ class LaunchOptions:
     config: Config = field(default_factory=Config)
     verbose: bool = False
     faults: tuple[Fault, ...] = ()  # fault injection (tests of reliability)
+    link_faults: str = ""  # message loss/duplication/reordering at coordinator and agents
 
 
 @dataclass
@@ -264,16 +265,19 @@ class Child:
     log_path: Path
     args: list[str] = field(default_factory=list)
     verbose: bool = False
+    env: dict = field(default_factory=dict)
 
 
-def _spawn(name: str, args: list[str], logs: Path, verbose: bool) -> Child:
+def _spawn(
+    name: str, args: list[str], logs: Path, verbose: bool, extra_env: dict | None = None
+) -> Child:
     log_path = logs / f"{name}.log"
     f = open(log_path, "a")  # noqa: SIM115 - kept open for the child's lifetime
     cmd = [sys.executable, "-m", "polyswarm"] + (["-vv"] if verbose else ["-v"]) + args
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env = dict(os.environ, PYTHONUNBUFFERED="1", **(extra_env or {}))
     proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
     f.close()
-    return Child(name, proc, log_path, args, verbose)
+    return Child(name, proc, log_path, args, verbose, extra_env or {})
 
 
 def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
@@ -287,7 +291,7 @@ def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
         if c.proc.poll() is None:
             c.proc.kill()
             c.proc.wait()
-        children[k] = _spawn(c.name, c.args, logs, c.verbose)
+        children[k] = _spawn(c.name, c.args, logs, c.verbose, c.env)
     else:
         sig = {
             FaultAction.KILL: signal.SIGKILL,
@@ -368,12 +372,14 @@ def launch(
     try:
         # a router of its own: the others keep talking while the coordinator restarts
         children.append(_spawn("router", ["router", "--listen", cfg.comms.endpoint], logs, False))
+        faulty = {"POLYSWARM_LINK_FAULTS": opts.link_faults} if opts.link_faults else {}
         children.append(
             _spawn(
                 "coordinator",
                 ["coordinator", "--config", conf, "--connect", cfg.comms.endpoint],
                 logs,
                 opts.verbose,
+                faulty,
             )
         )
         sim_args = [
@@ -390,7 +396,7 @@ def launch(
         children.append(_spawn("sim", sim_args, logs, opts.verbose))
         for rid in ids:
             children.append(
-                _spawn(rid, ["agent", "--id", rid, "--config", conf], logs, opts.verbose)
+                _spawn(rid, ["agent", "--id", rid, "--config", conf], logs, opts.verbose, faulty)
             )
         with open_session(SessionSpec.client(cfg.comms.endpoint)) as session:
             bus = Bus(session, "observer")

@@ -30,6 +30,7 @@ from sim import Simulation, World
 log = logging.getLogger(__name__)
 
 CMD_TIMEOUT_S = 0.5  # simulated seconds without a command: the robot stops
+ACK_TIMEOUT_S = 1.0  # wall seconds: a scan never acknowledged this long was lost
 STALL_WARN_S = 5.0  # wall seconds waiting for an agent before a warning
 
 
@@ -70,6 +71,7 @@ def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration
     alive: set[tuple[str, str]] = set()
     acked = dict.fromkeys(ids, -1)  # last scan seq each agent has acknowledged
     sent: dict[str, list[tuple[int, float]]] = {rid: [] for rid in ids}  # (seq, t) unacked
+    sent_wall: dict[str, dict[int, float]] = {rid: {} for rid in ids}  # seq -> wall time
     last_cmd_t = dict.fromkeys(ids, -math.inf)
 
     def drain(timeout: float = 0.0) -> None:
@@ -93,6 +95,7 @@ def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration
             if msg.ack > acked[rid]:
                 acked[rid] = msg.ack
                 sent[rid] = [(s, t) for s, t in sent[rid] if s > msg.ack]
+                sent_wall[rid] = {s: w for s, w in sent_wall[rid].items() if s > msg.ack}
 
     # wait for the processes that must be up before time starts
     need = set()
@@ -112,6 +115,17 @@ def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration
     stall_t = None
     while not stop.is_set() and sim.time < duration_s:
         drain()
+        # a scan unacknowledged for ACK_TIMEOUT_S of wall time was lost on the way: the
+        # agent acknowledges later scans only if it is sent some
+        now_wall = time.monotonic()
+        for rid in ids:
+            if (
+                sent[rid]
+                and now_wall - sent_wall[rid].get(sent[rid][0][0], now_wall) > ACK_TIMEOUT_S
+            ):
+                lost = sent[rid].pop(0)
+                sent_wall[rid].pop(lost[0], None)
+                log.debug("scan %d of %s never acknowledged: treated as lost", lost[0], rid)
         # keep pace with the slowest live agent
         lagging = [
             rid
@@ -154,7 +168,9 @@ def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration
                 t,
             )
             if ("agent", rid) in alive:
-                sent[rid].append((bus.last_seq(keys.robot(rid).scan), t))
+                seq = bus.last_seq(keys.robot(rid).scan)
+                sent[rid].append((seq, t))
+                sent_wall[rid][seq] = time.monotonic()
         poses = {rid: tuple(float(v) for v in sim.robots[k].pose) for rid, k in index.items()}
         walls = sum(r.wall_collisions for r in sim.robots)
         robots = sum(r.robot_collisions for r in sim.robots)
