@@ -565,6 +565,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
 
 def _save(coord: Coordinator, state_dir: str) -> None:
     try:
+        coord.flush()  # what the robots sent is merged before it is written
         persist.save_coordinator(
             state_dir, coord.merged, {r.id: r.map for r in coord.robots.values()}
         )

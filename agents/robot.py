@@ -63,6 +63,8 @@ YIELD_S = 6.0  # ... driving about a metre away for at most this long
 PEER_NEAR_M = 1.5
 PEER_FRESH_S = 2.0
 FACING_RAD = 0.3  # at the goal, turn until the frontier is this close to straight ahead
+UNREACHABLE_AFTER_S = 3.0  # planning must fail this long before a target is unreachable
+PLAN_RETRY_S = 0.5  # ... retried this often meanwhile
 SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
 
@@ -120,6 +122,7 @@ class RobotAgent:
         self._status_dirty = True
         self._last_odom_xy: np.ndarray | None = None
         self._facing = False  # at the goal, turning towards the frontier
+        self._plan_fail_since: float | None = None  # planning fails since (retrying)
         self.peers: dict[str, tuple[float, np.ndarray]] = {}  # other robots: (stamp, xy)
         self._blocked_since: float | None = None
         self._yield_until: float | None = None
@@ -182,6 +185,7 @@ class RobotAgent:
         if same:
             return
         log.info("%s: assignment %s %d at (%.1f, %.1f)", self.id, a.kind, a.target, *a.goal)
+        self._plan_fail_since = None
         self.follower.set_path(None)
         self._facing = False
         if a.kind == AssignmentKind.STOP:
@@ -220,7 +224,10 @@ class RobotAgent:
         # 3. navigation: replan as the map grows
         if self.assignment is not None and self.assignment.kind != AssignmentKind.STOP:
             due = stamp_s - self._last_plan_t >= REPLAN_PERIOD_S
-            if due or (self.follower.path is None and self.state == RobotState.NAVIGATING):
+            retry = stamp_s - self._last_plan_t >= PLAN_RETRY_S
+            if due or (
+                self.follower.path is None and self.state == RobotState.NAVIGATING and retry
+            ):
                 self._plan(stamp_s)
         # 4. local control around the path, avoiding what the scan sees (farther from
         #    what the map does not explain: other robots, people)
@@ -380,8 +387,15 @@ class RobotAgent:
         except PlanningError as e:
             self.stats.plan_failures += 1
             self.follower.set_path(None)
-            self._set_state(RobotState.UNREACHABLE, str(e))
+            # the map may not hold the way yet (a delta in flight, a resync): retry for a
+            # while before telling the coordinator
+            self._plan_fail_since = self._plan_fail_since or now_s
+            if now_s - self._plan_fail_since < UNREACHABLE_AFTER_S:
+                self._set_state(RobotState.NAVIGATING, f"no path yet ({e}); retrying")
+            else:
+                self._set_state(RobotState.UNREACHABLE, str(e))
             return
+        self._plan_fail_since = None
         first = self.follower.path is None
         self.follower.set_path(path.points)
         if first or self.state not in (RobotState.NAVIGATING,):
