@@ -418,3 +418,36 @@ def bench_cells(
             f"{m['map_bytes']:,}",
         )
     Console().print(t)
+
+
+@bench_app.command("load")
+def bench_load(
+    as_json: bool = JSON_OPT,
+    robots: int = typer.Option(10, min=1, help="Robots (agent processes)."),
+    world: str = typer.Option("data:maze", help="World to explore."),
+    duration: float = typer.Option(1800.0, help="Soak length, wall-clock seconds."),
+    out: Path = typer.Option(None, help="Run folder (default: a temporary folder)."),
+) -> None:
+    """Many robots against one coordinator: lost messages, cycle p95, memory growth."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import load
+
+    with Console(stderr=True).status(f"{robots} robots for {duration:.0f} s"):
+        res = load.run(robots, world, duration, out)
+    if as_json:
+        typer.echo(json.dumps(res, indent=2, default=float))
+        return
+    g = res["memory_growth_fraction"]
+    _emit(
+        res,
+        False,
+        f"Load: {res['robots']} robots on {res['world']}",
+        [
+            ("wall / simulated time", f"{res['wall_time_s']:.0f} s / {res['sim_time_s']:.0f} s"),
+            ("messages lost (map versions)", str(res["messages_lost"])),
+            ("coordinator cycle p95", f"{res['coordinator_cycle_p95_ms']:.0f} ms"),
+            ("coordinator memory growth", "-" if g is None else f"{100 * g:.1f} %"),
+            ("crashed processes", ", ".join(res["crashed_processes"]) or "none"),
+        ],
+    )

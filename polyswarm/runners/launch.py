@@ -49,6 +49,7 @@ from protocols.messages import (
 log = logging.getLogger(__name__)
 
 SHUTDOWN_S = 4.0  # children get this long to exit after SIGTERM before SIGKILL
+RSS_EVERY_S = 5.0  # wall seconds between memory samples of the coordinator
 COVERAGE_EVERY_S = 1.0  # simulated seconds between coverage samples
 START_TIMEOUT_S = 60.0  # wall seconds for all processes to come up
 
@@ -143,6 +144,7 @@ class Observer:
         self._cell_cover: dict = {}  # cell index -> (cell version, covered m2)
         self._truth_cells: dict = {}
         self.need_resync = False
+        self.coordinator_rss_mb: list[tuple[float, float]] = []  # (wall s, resident MB)
         self._behind: float | None = None
 
     # coverage = explored space inside the reachable free space, over its area
@@ -246,6 +248,9 @@ class Observer:
             ),
             "merged_map_bytes": None,
             "wall_time_s": wall_s,
+            "coordinator_rss_mb_over_time": [
+                [round(t, 1), round(m, 1)] for t, m in self.coordinator_rss_mb
+            ],
         }
 
 
@@ -278,6 +283,19 @@ def _spawn(
     proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
     f.close()
     return Child(name, proc, log_path, args, verbose, extra_env or {})
+
+
+def _rss_mb(child: Child | None) -> float | None:
+    """Resident memory of a child process (Linux /proc), megabytes."""
+    if child is None or child.proc.poll() is not None:
+        return None
+    try:
+        for line in Path(f"/proc/{child.proc.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
 
 
 def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
@@ -434,6 +452,7 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0) -> str:
     faulted: set[str] = set()  # killed by fault injection (not a reason to stop)
     logs = children[0].log_path.parent
     last_progress = 0.0
+    last_rss = -math.inf
     up = False
     while True:
         for item in bus.poll(timeout_s=0.05):
@@ -451,6 +470,11 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0) -> str:
                     log.warning("observer: bad merged map: %s", e)
         up = up or obs.sim_t > 0
         obs.sample()
+        if time.monotonic() - last_rss >= RSS_EVERY_S:
+            last_rss = time.monotonic()
+            rss = _rss_mb(next((c for c in children if c.name == "coordinator"), None))
+            if rss is not None:
+                obs.coordinator_rss_mb.append((last_rss - t0, rss))
         now = time.monotonic()
         if progress is not None and now - last_progress >= 0.5:
             last_progress = now
