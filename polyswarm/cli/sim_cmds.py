@@ -31,6 +31,9 @@ def sim_cmd(
     ),
     endpoint: str | None = typer.Option(None, help="--serve: Zenoh router endpoint."),
     zenoh_config: Path | None = typer.Option(None, help="--serve: Zenoh JSON5 config file."),
+    wait_coordinator: bool = typer.Option(
+        False, help="--serve: start time only once the coordinator is up (as well as agents)."
+    ),
 ) -> None:
     """Drive robots with a reactive wander controller and report what happened; with
     --serve, run the simulation for robot agents over Zenoh (robots from [[robots]])."""
@@ -48,7 +51,7 @@ def sim_cmd(
     cfg = with_overrides(load_config(config), {"sim": {"seed": seed}})
     w = load_world(world, seed=seed)
     if serve:
-        _serve(cfg, w, robots, speed, endpoint, zenoh_config, gui)
+        _serve(cfg, w, robots, speed, endpoint, zenoh_config, gui, wait_coordinator)
         return
     trails: list[list] = [[] for _ in range(robots)]
     t0 = time.perf_counter()
@@ -98,7 +101,9 @@ def plot_world(world, trajectories, path: Path) -> None:
     plt.close(fig)
 
 
-def _serve(cfg, world, robots: int, speed, endpoint, zenoh_config, gui: bool) -> None:
+def _serve(
+    cfg, world, robots: int, speed, endpoint, zenoh_config, gui: bool, wait_coordinator: bool
+) -> None:
     import dataclasses
 
     from agents.session import SessionSpec, stop_on_signals
@@ -114,7 +119,8 @@ def _serve(cfg, world, robots: int, speed, endpoint, zenoh_config, gui: bool) ->
     spec = SessionSpec.client(
         endpoint or cfg.comms.endpoint, str(zenoh_config or cfg.comms.zenoh_config or "")
     )
-    sim = serve(cfg, world, spec, stop_on_signals(), speed=speed, gui=gui)
+    wait_for = ("agents", "coordinator") if wait_coordinator else ("agents",)
+    sim = serve(cfg, world, spec, stop_on_signals(), speed=speed, gui=gui, wait_for=wait_for)
     typer.echo(
         f"simulated {sim.time:.1f} s; wall contacts "
         f"{sum(r.wall_collisions for r in sim.robots)}, robot contacts "

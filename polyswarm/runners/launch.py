@@ -410,7 +410,8 @@ def launch(
             "--seed",
             str(opts.seed),
         ]
-        sim_args += ["--speed", str(opts.speed)] + (["--gui"] if opts.gui else [])
+        sim_args += ["--speed", str(opts.speed), "--wait-coordinator"]
+        sim_args += ["--gui"] if opts.gui else []
         children.append(_spawn("sim", sim_args, logs, opts.verbose))
         for rid in ids:
             children.append(
