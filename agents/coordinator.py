@@ -58,7 +58,7 @@ EXCLUDE_S = 30.0  # a robot that failed a target is not sent there again for thi
 RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
-MERGE_PERIOD_S = 0.5  # robots' changed cells are merged at least this often (batched)
+MERGE_PERIOD_S = 1.0  # robots' changed cells are merged at least this often (batched)
 
 
 @dataclass

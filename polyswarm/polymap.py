@@ -395,18 +395,23 @@ class GridPolyMap:
             return MergeResult(self, frozenset())
         # neighbours are touched too: their border vectors may turn from frontier to sector
         idxs = sorted({c.index for c in cells} | {n for c in cells for n in _neighbours(c.index)})
-        by_index: dict[CellIndex, shapely.Geometry] = {}
+        groups: dict[CellIndex, list] = {}
         for c in cells:
-            have = by_index.get(c.index)
-            by_index[c.index] = (
-                c.region
-                if have is None
-                else _union_snapped(np.array([have]), np.array([c.region]))[0]
+            groups.setdefault(c.index, []).append(c.region)
+        by_index = {i: g[0] for i, g in groups.items()}
+        # cells sharing an index are united in rounds, one vectorised union per round
+        for k in range(1, max(len(g) for g in groups.values())):
+            more = [i for i, g in groups.items() if len(g) > k]
+            united = _union_snapped(
+                np.array([by_index[i] for i in more], dtype=object),
+                np.array([groups[i][k] for i in more], dtype=object),
             )
+            by_index.update(zip(more, united, strict=True))
         pieces = np.array([by_index.get(i, shapely.Polygon()) for i in idxs], dtype=object)
-        starts = [c.vectors_of_type(VectorType.OBSTACLE)[0] for c in cells]
-        ends = [c.vectors_of_type(VectorType.OBSTACLE)[1] for c in cells]
-        return self._merge_pieces(idxs, pieces, np.concatenate(starts), np.concatenate(ends))
+        obstacle = [c.vectors_of_type(VectorType.OBSTACLE) for c in cells]
+        starts = np.concatenate([o[0] for o in obstacle])
+        ends = np.concatenate([o[1] for o in obstacle])
+        return self._merge_pieces(idxs, pieces, starts, ends)
 
     def _candidate_cells(self, bounds) -> list[CellIndex]:
         s = self.cell_size
