@@ -22,6 +22,7 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 TWIST = "geometry_msgs/msg/Twist"
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 GRID_UPDATE = "map_msgs/msg/OccupancyGridUpdate"
+MAX_ODOM_VALUE = 1e6  # metres, m/s, rad/s: anything larger is not a robot's odometry
 MAX_CDR_BYTES = 16 * 1024 * 1024  # an incoming ROS message larger than this is refused
 
 _GRID_UPDATE_MSG = """
@@ -70,7 +71,11 @@ def _deserialize(data: bytes, typename: str):
 def decode_laserscan(data: bytes) -> LaserScan:
     """A sensor_msgs/LaserScan (CDR) as a LaserScan; ProtocolError on any defect."""
     m = _deserialize(data, LASER_SCAN)
-    ranges = np.asarray(m.ranges, dtype=float)
+    try:
+        with np.errstate(invalid="ignore"):  # NaN beams are legal (invalid returns)
+            ranges = np.asarray(m.ranges, dtype=float).reshape(-1)
+    except (TypeError, ValueError) as e:
+        raise ProtocolError(f"LaserScan ranges: {e}") from None
     if not 2 <= len(ranges) <= MAX_BEAMS:
         raise ProtocolError(f"LaserScan with {len(ranges)} beams")
     vals = (m.angle_min, m.angle_increment, m.range_min, m.range_max)
@@ -97,9 +102,9 @@ def decode_odometry(data: bytes) -> tuple[float, np.ndarray, tuple[float, float]
     m = _deserialize(data, ODOMETRY)
     p, q = m.pose.pose.position, m.pose.pose.orientation
     vals = (p.x, p.y, q.x, q.y, q.z, q.w, m.twist.twist.linear.x, m.twist.twist.angular.z)
-    if not all(math.isfinite(v) for v in vals):
-        raise ProtocolError("Odometry with non-finite values")
-    norm = math.sqrt(q.x**2 + q.y**2 + q.z**2 + q.w**2)
+    if not all(math.isfinite(v) and abs(v) <= MAX_ODOM_VALUE for v in vals):
+        raise ProtocolError(f"Odometry with non-finite or values beyond {MAX_ODOM_VALUE:g}")
+    norm = math.hypot(q.x, q.y, q.z, q.w)
     if not 0.5 < norm < 1.5:
         raise ProtocolError(f"Odometry orientation is not a unit quaternion (norm {norm:.3f})")
     yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y**2 + q.z**2))

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from polyswarm.cli import bench_app
+from polyswarm.cli import app, bench_app
 
 JSON_OPT = typer.Option(False, "--json", help="Print JSON instead of a table.")
 
@@ -451,3 +451,34 @@ def bench_load(
             ("crashed processes", ", ".join(res["crashed_processes"]) or "none"),
         ],
     )
+
+
+@app.command("fuzz")
+def fuzz_cmd(
+    count: int = typer.Option(100_000, min=1, help="Mutated inputs per decoder."),
+    seed: int = typer.Option(0, help="Seed of the mutations."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Fuzz every decoder of outside bytes (messages, maps, deltas, ROS CDR)."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import fuzz
+    from polyswarm.errors import PolyswarmError
+
+    with Console(stderr=True).status("fuzzing") as status:
+        res = fuzz.run(count, seed, lambda n, k, c: status.update(f"fuzzing {n}: {k}/{c}"))
+    if as_json:
+        typer.echo(json.dumps(res, indent=2))
+    else:
+        _emit(
+            res,
+            False,
+            f"Fuzzing, {count:,} inputs per decoder",
+            [
+                (n, f"{r['rejected']:,} rejected, {r['accepted']:,} ok, {r['crashes']} crashes")
+                for n, r in res.items()
+            ],
+        )
+    crashed = {n: r["examples"] for n, r in res.items() if r["crashes"]}
+    if crashed:
+        raise PolyswarmError(f"decoders crashed: {crashed}")

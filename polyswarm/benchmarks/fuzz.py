@@ -1,0 +1,87 @@
+"""``polyswarm fuzz``: mutation fuzzing of every decoder of outside bytes.
+
+Valid seeds (golden vectors and freshly encoded messages) are mutated (byte flips,
+truncations, insertions, duplicated spans) and fed to their decoder; anything but the
+decoder's own error type is a crash. Deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from polyswarm.errors import DecodeError
+
+
+def _mutate(rng: random.Random, data: bytes) -> bytes:
+    b = bytearray(data)
+    for _ in range(rng.randint(1, 4)):
+        op = rng.randrange(5)
+        if not b:
+            b.append(rng.randrange(256))
+            continue
+        i = rng.randrange(len(b))
+        if op == 0:
+            b[i] = rng.randrange(256)
+        elif op == 1:
+            b[i] ^= 1 << rng.randrange(8)
+        elif op == 2:
+            del b[i:]
+        elif op == 3:
+            b[i:i] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 8)))
+        else:
+            j = min(len(b), i + rng.randint(1, 16))
+            b[i:i] = b[i:j]
+    return bytes(b)
+
+
+def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
+    """Decoder and valid seeds per kind of outside data."""
+    from polyswarm.scan import LaserScan
+    from protocols import ros
+    from protocols.golden.make_golden import golden_messages
+    from protocols.mapcodec import decode_delta, decode_map
+    from protocols.messages import decode, encode
+
+    golden = Path(__file__).resolve().parents[2] / "protocols" / "golden"
+    scan = LaserScan(np.linspace(0.5, 5.0, 32), -1.5, 0.1, 0.1, 30.0, 3.25)
+    return {
+        "message": (decode, [encode(m, "r1", 7, 12.5) for _, m in golden_messages()]),
+        "map": (decode_map, [(golden / "map_v1.bin").read_bytes()]),
+        "delta": (decode_delta, [(golden / "delta_v1.bin").read_bytes()]),
+        "ros-laserscan": (ros.decode_laserscan, [ros.encode_laserscan(scan)]),
+        "ros-odometry": (ros.decode_odometry, [ros.encode_odometry(1.0, (1.0, 2.0, 0.5))]),
+        "ros-twist": (ros.decode_twist, [ros.encode_twist(0.2, -0.4)]),
+    }
+
+
+def run(count: int, seed: int = 0, progress=None) -> dict:
+    """``count`` mutated inputs per decoder; crashes (unexpected exceptions) listed."""
+    out = {}
+    for name, (decode, seeds) in decoders().items():
+        rng = random.Random(f"{seed}-{name}")
+        accepted = rejected = 0
+        crashes: list[str] = []
+        for k in range(count):
+            data = _mutate(rng, seeds[k % len(seeds)])
+            try:
+                decode(data)
+                accepted += 1
+            except DecodeError:
+                rejected += 1
+            except Exception as e:  # a crash: the decoder let something else escape
+                if len(crashes) < 10:
+                    crashes.append(f"{type(e).__name__}: {e} (input {data[:64].hex()})")
+            if progress and k % 1000 == 0:
+                progress(name, k, count)
+        out[name] = {
+            "inputs": count,
+            "accepted": accepted,
+            "rejected": rejected,
+            "crashes": count - accepted - rejected,
+            "examples": crashes,
+        }
+    return out
