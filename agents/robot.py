@@ -389,7 +389,8 @@ class RobotAgent:
             self.follower.set_path(None)
             # the map may not hold the way yet (a delta in flight, a resync): retry for a
             # while before telling the coordinator
-            self._plan_fail_since = self._plan_fail_since or now_s
+            if self._plan_fail_since is None:
+                self._plan_fail_since = now_s
             if now_s - self._plan_fail_since < UNREACHABLE_AFTER_S:
                 self._set_state(RobotState.NAVIGATING, f"no path yet ({e}); retrying")
             else:
