@@ -1,0 +1,47 @@
+"""The local controller on situations checkable by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyswarm.control import ControlParams, Follow, PathFollower, _segment_clearance
+
+
+def follower(path) -> PathFollower:
+    f = PathFollower(ControlParams(radius_m=0.2, max_v_mps=0.5, max_w_radps=1.5))
+    f.set_path(np.array(path, dtype=float))
+    return f
+
+
+def test_free_straight_path_is_driven_forward():
+    cmd = follower([[0, 0], [5, 0]]).command((0, 0, 0), np.zeros((0, 2)))
+    assert cmd.state == Follow.DRIVING and cmd.v_mps > 0.3 and abs(cmd.w_radps) < 0.2
+
+
+def test_pressed_against_a_wall_ahead_the_robot_backs_off():
+    wall = np.array([[0.21, y] for y in np.linspace(-0.3, 0.3, 13)])  # 1 cm from its disc
+    cmd = follower([[0, 0], [5, 0]]).command((0, 0, 0), wall)
+    assert cmd.state == Follow.BLOCKED and cmd.v_mps < 0 and cmd.w_radps == 0
+
+
+def test_blocked_with_a_wall_behind_too_it_waits():
+    front = [[0.21, y] for y in np.linspace(-0.3, 0.3, 13)]
+    back = [[-0.25, y] for y in np.linspace(-0.3, 0.3, 13)]
+    cmd = follower([[0, 0], [5, 0]]).command((0, 0, 0), np.array(front + back))
+    assert cmd.state == Follow.BLOCKED and cmd.v_mps == 0 and cmd.w_radps == 0
+
+
+def test_carrot_behind_a_door_jamb_is_replaced_by_one_in_sight():
+    # path: 0.5 m east, then north through a gap; the jamb at (0.25, 0.3) hides the far
+    # carrot (0.5, 0.5): heading for it would cut the corner into the jamb
+    path = [[0, 0], [0.5, 0], [0.5, 3]]
+    jamb = np.array([[x, 0.3] for x in np.linspace(-1.0, 0.25, 26)])
+    cmd = follower(path).command((0, 0, 0), jamb)
+    assert cmd.state == Follow.DRIVING and abs(cmd.w_radps) < 0.5  # on along the first leg
+    assert _segment_clearance(np.array([0.5, 0.5]), jamb) < 0.23  # the far carrot: blocked
+
+
+def test_segment_clearance_by_hand():
+    pts = np.array([[1.0, 1.0], [3.0, 0.0], [-1.0, 0.0]])
+    assert _segment_clearance(np.array([2.0, 0.0]), pts) == 1.0
+    assert _segment_clearance(np.array([2.0, 0.0]), np.zeros((0, 2))) == float("inf")
