@@ -379,19 +379,11 @@ class Coordinator:
                 and r.assignment.target == tid
                 and np.hypot(*(np.array(r.assignment.goal) - t.goal)) > GOAL_MOVED_M
             )
-            if moved:  # the frontier moved as the map grew: the robot follows it
+            new = r.assignment is None or r.assignment.target != tid
+            if new:
+                r.best_cost, r.progress_t = math.inf, self.now
+            if new or moved:  # a new target, or the frontier moved as the map grew
                 r.reached_t = None
-                r.sent_t = -math.inf
-                r.assignment = Assignment(
-                    AssignmentKind.EXPLORE,
-                    tid,
-                    (float(t.goal[0]), float(t.goal[1])),
-                    tuple((float(x), float(y)) for x, y in t.frontier.points[:64]),
-                    float(costs[k, j]),
-                    self.merged.version,
-                )
-            elif r.assignment is None or r.assignment.target != tid:
-                r.best_cost, r.progress_t, r.reached_t = math.inf, self.now, None
                 r.sent_t = -math.inf
                 r.assignment = Assignment(
                     AssignmentKind.EXPLORE,

@@ -1,7 +1,11 @@
 """Persisted state of agents and the coordinator: nothing mapped is lost on a restart.
 
-A robot agent writes its map and pose before it publishes each map delta (so what the
-others have seen is always on disk) and on shutdown; the coordinator writes the merged
+A robot agent appends each map delta to a journal before it publishes it (so what the
+others have seen is always on disk; an append costs the same whatever the map's size,
+while rewriting the whole map grows with it) and writes a snapshot of its whole map
+every ``SNAPSHOT_EVERY`` deltas and on shutdown, which empties the journal; loading
+applies the journal to the snapshot.
+The coordinator writes the merged
 map and every robot's map every ``COORDINATOR_PERIOD_S`` and on shutdown. Files are
 written to a temporary name and renamed (atomic on POSIX): a crash mid-write leaves the
 previous state. A state file that does not decode is moved aside (``.corrupt``) and
@@ -20,11 +24,12 @@ import numpy as np
 
 from polyswarm.errors import PolyswarmError
 from polyswarm.polymap import GridPolyMap
-from protocols.mapcodec import decode_map, encode_map
+from protocols.mapcodec import decode_delta, decode_map, encode_map
 
 log = logging.getLogger(__name__)
 
 COORDINATOR_PERIOD_S = 5.0  # simulated or wall seconds between coordinator state writes
+SNAPSHOT_EVERY = 50  # agent deltas journaled between two snapshots of the whole map
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
@@ -58,24 +63,63 @@ def load_map(path: Path) -> GridPolyMap | None:
         return None
 
 
-def agent_paths(state_dir: str | Path, robot_id: str) -> tuple[Path, Path]:
+def agent_paths(state_dir: str | Path, robot_id: str) -> tuple[Path, Path, Path]:
     d = Path(state_dir)
-    return d / f"{robot_id}.polymap", d / f"{robot_id}.json"
+    return d / f"{robot_id}.polymap", d / f"{robot_id}.json", d / f"{robot_id}.journal"
 
 
-def save_agent(state_dir: str | Path, robot_id: str, pmap: GridPolyMap, pose) -> None:
-    map_path, meta_path = agent_paths(state_dir, robot_id)
-    save_map(map_path, pmap)
-    meta = {"robot": robot_id, "pose": [float(v) for v in pose], "map_version": pmap.version}
+def _write_meta(meta_path: Path, robot_id: str, pose, version: int) -> None:
+    meta = {"robot": robot_id, "pose": [float(v) for v in pose], "map_version": version}
     _atomic_write(meta_path, json.dumps(meta).encode())
 
 
+def save_agent(state_dir: str | Path, robot_id: str, pmap: GridPolyMap, pose) -> None:
+    """A snapshot of the whole map and the pose; the journal starts empty again."""
+    map_path, meta_path, journal = agent_paths(state_dir, robot_id)
+    save_map(map_path, pmap)
+    _write_meta(meta_path, robot_id, pose, pmap.version)
+    journal.unlink(missing_ok=True)
+
+
+def journal_delta(state_dir: str | Path, robot_id: str, delta_bytes: bytes, pose, version) -> None:
+    """Append one encoded delta (length-prefixed) to the journal, flushed to disk."""
+    _, meta_path, journal = agent_paths(state_dir, robot_id)
+    journal.parent.mkdir(parents=True, exist_ok=True)
+    with open(journal, "ab") as f:
+        f.write(len(delta_bytes).to_bytes(4, "little") + delta_bytes)
+        f.flush()
+        os.fsync(f.fileno())
+    _write_meta(meta_path, robot_id, pose, version)
+
+
+def _replay_journal(journal: Path, pmap: GridPolyMap) -> GridPolyMap:
+    """The snapshot with the journal's deltas applied; a torn last record (a crash
+    mid-write) ends the replay, a record that does not apply is logged and skipped."""
+    if not journal.exists():
+        return pmap
+    data = journal.read_bytes()
+    pos = 0
+    while pos + 4 <= len(data):
+        n = int.from_bytes(data[pos : pos + 4], "little")
+        record = data[pos + 4 : pos + 4 + n]
+        if len(record) < n:
+            log.warning("journal %s ends in a torn record: ignored", journal)
+            break
+        pos += 4 + n
+        try:
+            pmap = pmap.apply_delta(decode_delta(record))
+        except PolyswarmError as e:
+            log.error("journal %s: a delta does not apply (%s): skipped", journal, e)
+    return pmap
+
+
 def load_agent(state_dir: str | Path, robot_id: str) -> tuple[GridPolyMap, np.ndarray] | None:
-    """The persisted map and last pose of ``robot_id``, or None."""
-    map_path, meta_path = agent_paths(state_dir, robot_id)
+    """The persisted map (snapshot plus journal) and last pose of ``robot_id``, or None."""
+    map_path, meta_path, journal = agent_paths(state_dir, robot_id)
     pmap = load_map(map_path)
     if pmap is None or not meta_path.exists():
         return None
+    pmap = _replay_journal(journal, pmap)
     try:
         meta = json.loads(meta_path.read_text())
         pose = np.array(meta["pose"], dtype=float)

@@ -130,6 +130,7 @@ class RobotAgent:
         self._resume = False
         self.stats = AgentStats()
         self.bytes_sent = 0  # maintained by the transport
+        self.journaled = 0  # deltas persisted since the last snapshot (0: none yet)
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -569,20 +570,30 @@ def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -
     except PolyswarmError as e:
         log.warning("%s: scan %d refused: %s", agent.id, item.seq, e)
         return
-    if out.delta is not None and state_dir:
+    wire = encode_delta(out.delta) if out.delta is not None else None
+    if wire is not None and state_dir:
         # on disk before anyone has seen it: a restart never reuses a published version
-        persist.save_agent(state_dir, agent.id, agent.slam.map, agent.pose)
-    _send(bus, me, agent, out, item.stamp_s, item.seq, sink)
+        if agent.journaled == 0 or agent.journaled >= persist.SNAPSHOT_EVERY:
+            persist.save_agent(state_dir, agent.id, agent.slam.map, agent.pose)
+            agent.journaled = 1
+        else:
+            persist.journal_delta(state_dir, agent.id, wire, agent.pose, out.delta.version)
+            agent.journaled += 1
+    _send(bus, me, agent, out, item.stamp_s, item.seq, sink, wire)
 
 
-def _send(bus, me, agent: RobotAgent, out: Outbox, stamp_s: float, scan_seq: int, sink) -> None:
+def _send(
+    bus, me, agent: RobotAgent, out: Outbox, stamp_s: float, scan_seq: int, sink, wire=None
+) -> None:
+    """Send what ``out`` holds; ``wire`` is the delta already encoded (or None)."""
     if out.cmd is not None:
         sink.velocity(out.cmd[0], out.cmd[1], scan_seq, stamp_s)
     sent = 0
     if out.delta is not None:
         d = out.delta
+        wire = wire if wire is not None else encode_delta(d)
         sent += bus.publish_map(
-            me.map_delta, MapKind.DELTA, encode_delta(d), d.base_version, d.version, stamp_s
+            me.map_delta, MapKind.DELTA, wire, d.base_version, d.version, stamp_s
         )
     if out.pose is not None:
         sent += bus.publish(me.pose, out.pose, stamp_s)

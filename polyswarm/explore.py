@@ -38,8 +38,6 @@ FALLBACK_RADIUS_M = 4.0  # ... else the nearest graph node this close that sees 
 FALLBACK_MIN_SIN = 0.5  # ... preferring views at least 30 degrees off the frontier's line
 FALLBACK_GRAZING_PENALTY_M = 10.0  # ... (a grazing view counts as this much farther)
 UTILITY_CAP_M = 6.0  # a frontier longer than this is worth no more
-SEAM_M = 0.1  # a frontier this close to walls all along is a seam in a wall, not a target
-SEAM_SAMPLE_M = 0.1  # ... tested at points this far apart
 UTILITY_WEIGHT = 1.0  # metres of path a metre of frontier is worth
 UNREACHABLE = math.inf
 
@@ -81,7 +79,7 @@ def frontier_targets(
     Frontiers with no goal, or near a blacklisted point, are not targets.
     ``separation_m`` > 0 keeps one target per neighbourhood (the longest frontier)."""
     usable = graph.has_node if reach is None else reach.reaches
-    segs = _without_seams(pmap, extract_frontiers(pmap, min_length_m, max_length_m))
+    segs = extract_frontiers(pmap, min_length_m, max_length_m)
     if not segs:
         return []
     cands, owner = [], []
@@ -137,22 +135,6 @@ def frontier_targets(
             if all(np.hypot(*(t.goal - o.goal)) >= separation_m for o in kept):
                 kept.append(t)
         out = kept
-    return out
-
-
-def _without_seams(pmap: GridPolyMap, segs: list[FrontierSegment]) -> list[FrontierSegment]:
-    """Drop frontiers that run along a mapped wall, within ``SEAM_M`` of its obstacle
-    vectors all the way: the space behind them is too thin for a keyframe to add (merging
-    ignores growth thinner than slam.min_growth_m), so looking at them closes nothing."""
-    out = []
-    for seg in segs:
-        n = max(2, math.ceil(seg.length_m / SEAM_SAMPLE_M) + 1)
-        pts = np.array([point_along(seg.points, d) for d in np.linspace(0, seg.length_m, n)])
-        lo, hi = pts.min(axis=0) - SEAM_M, pts.max(axis=0) + SEAM_M
-        cells = pmap.cells_within(*(0.5 * (lo + hi)), 0.5 * float(np.hypot(*(hi - lo))) + 0.1)
-        st, en, _ = pmap.vectors([VectorType.OBSTACLE], cells)
-        if len(st) == 0 or clear_of(pts, st, en, SEAM_M).any():
-            out.append(seg)
     return out
 
 

@@ -81,3 +81,27 @@ def test_message_loss_duplication_and_reordering_heal_by_resync(tmp_path, faults
     assert completed(m) and m["crashed_processes"] == []
     assert "fetching the full map" in log_text(out, "coordinator")  # gaps were seen and healed
     assert_nothing_lost(out)
+
+
+def test_agent_state_is_a_snapshot_plus_a_journal_of_deltas(tmp_path):
+    """Unit level: the journal replays onto the snapshot; a torn last record is ignored."""
+    from agents import persist
+    from polyswarm.polymap import GridPolyMap
+    from protocols.mapcodec import encode_delta
+    from tests.conftest import F, O, rect
+
+    a = GridPolyMap(2.0).merge(rect(0.5, 0.5, 3.0, 1.5, (O, F, O, O))).map
+    b = a.merge(rect(2.5, 0.5, 5.0, 1.5, (O, F, O, F))).map
+    c = b.merge(rect(4.5, 0.5, 7.0, 1.5, (O, O, O, F))).map
+    persist.save_agent(tmp_path, "r1", a, (1.0, 1.0, 0.0))
+    persist.journal_delta(tmp_path, "r1", encode_delta(b.delta_since(a.version)), (3, 1, 0), 2)
+    persist.journal_delta(tmp_path, "r1", encode_delta(c.delta_since(b.version)), (6, 1, 0), 3)
+    pmap, pose = persist.load_agent(tmp_path, "r1")
+    assert pmap.version == c.version and pmap.explored_area() == pytest.approx(c.explored_area())
+    assert list(pose) == [6, 1, 0]
+    journal = tmp_path / "r1.journal"
+    journal.write_bytes(journal.read_bytes()[:-5])  # a crash in the middle of the last write
+    pmap, _ = persist.load_agent(tmp_path, "r1")
+    assert pmap.version == b.version  # the torn delta is lost, the others are not
+    persist.save_agent(tmp_path, "r1", c, (6, 1, 0))
+    assert not journal.exists()
