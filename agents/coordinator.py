@@ -58,6 +58,9 @@ EXCLUDE_S = 30.0  # a robot that failed a target is not sent there again for thi
 RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
+END_CONFIRM_CYCLES = 3  # ... and the mission ends only after this many cycles in a row
+# (simulated seconds run faster than wall seconds: a loaded coordinator may manage a single
+# cycle in end_confirm_s, and one cycle on a lagging map must not end a mission)
 MERGE_PERIOD_S = 1.0  # robots' changed cells are merged at least this often (batched)
 
 
@@ -77,6 +80,7 @@ class RobotInfo:
     reached_t: float | None = None  # when the robot reported its target reached
     behind_since: float | None = None  # the robot's map version is ahead of ours since
     announced: int = 0  # the robot's map version, as its poses tell
+    pose_t: float = -math.inf  # stamp of the robot's latest pose
     home_failed: bool = False  # could not drive back to its start (the mission still ends)
 
 
@@ -103,6 +107,7 @@ class Coordinator:
         self.blacklist: list[np.ndarray] = []
         self.state = MissionState.STARTING
         self._no_target_since: float | None = None
+        self._no_target_cycles = 0
         self._last_cycle = -math.inf
         self._wake = True
         self._pending_ms = 0.0  # merge time since the last cycle (counts into the cycle)
@@ -146,6 +151,7 @@ class Coordinator:
         info = self.robot(rid)
         info.pose = np.array([pose.x, pose.y, pose.theta])
         info.announced = max(info.announced, pose.map_version)
+        info.pose_t = max(info.pose_t, stamp_s)
         self._check_behind(info)
 
     def _check_behind(self, info: RobotInfo) -> None:
@@ -182,7 +188,7 @@ class Coordinator:
         elif status.state == RobotState.REACHED and a.kind == AssignmentKind.EXPLORE:
             # judged at the next cycles: a frontier still open after the robot stood
             # there and looked at it counts as a failure of that target
-            info.reached_t = self.now
+            info.reached_t = stamp_s
         self._wake = True
 
     def on_robot_delta(self, rid: str, stamp_s: float, delta: MapDelta) -> None:
@@ -269,21 +275,30 @@ class Coordinator:
             targets = self._update_targets(reach)
             ids = list(targets)
             costs = reach.costs([t.goal for t in targets.values()])
+            # a target excluded for every robot (failed recently) waits; it is not gone
+            reachable = np.isfinite(costs).any(axis=0)
             for k, r in enumerate(live):  # targets this robot failed recently
                 for j, tid in enumerate(ids):
                     if r.excluded.get(tid, -math.inf) > self.now:
                         costs[k, j] = math.inf
-            reachable = np.isfinite(costs).any(axis=0)
             if self.state == MissionState.RETURNING and reachable.any():
                 log.info("new frontiers while returning: exploring again")
                 self.state = MissionState.EXPLORING
             if self.state == MissionState.EXPLORING:
                 if not reachable.any():
-                    self._no_target_since = self._no_target_since or self.now
-                    if self.now - self._no_target_since >= self.cfg.explore.end_confirm_s:
+                    if self._no_target_since is None:
+                        self._no_target_since = self.now
+                    # every robot's map merged up to what it announced: nothing in flight
+                    in_flight = any(r.behind_since is not None for r in live)
+                    self._no_target_cycles += 0 if in_flight else 1
+                    if (
+                        self.now - self._no_target_since >= self.cfg.explore.end_confirm_s
+                        and self._no_target_cycles >= END_CONFIRM_CYCLES
+                    ):
                         self._end_exploration(live)
                 else:
                     self._no_target_since = None
+                    self._no_target_cycles = 0
                     # 3. assignment by strategy, keeping current targets unless beaten
                     self._assign(live, ids, targets, costs)
                     # 4. no progress towards a target for too long counts as a failure
@@ -400,7 +415,7 @@ class Coordinator:
             a = r.assignment
             if a is None or a.kind != AssignmentKind.EXPLORE or a.target not in ids:
                 continue
-            if r.reached_t is not None and self.now - r.reached_t >= REACHED_GRACE_S:
+            if r.reached_t is not None and self._looked(r):
                 # the robot stood there and looked; another look (from another goal, as
                 # the map has grown meanwhile) may still close it: a failure, not a verdict
                 r.reached_t = None
@@ -411,6 +426,14 @@ class Coordinator:
                 r.best_cost, r.progress_t = c, self.now
             elif self.now - r.progress_t > timeout:
                 self._failed(r, a.target, f"no progress for {timeout:.0f} s")
+
+    def _looked(self, r: RobotInfo) -> bool:
+        """Has the robot looked at its reached target long enough, and has what it saw
+        reached the merged map? (judged on the robot's own clock: a lagging coordinator
+        must not blame a target for a view it has not merged yet)"""
+        if r.reached_t is None or r.pose_t - r.reached_t < REACHED_GRACE_S:
+            return False
+        return r.map is not None and r.map.version >= r.announced and r.id not in self._pending
 
     def _failed(self, r: RobotInfo, tid: int, why: str) -> None:
         n = self.failures[tid] = self.failures.get(tid, 0) + 1
@@ -434,6 +457,7 @@ class Coordinator:
 
     def _end_exploration(self, live) -> None:
         self.targets = {}
+        self._no_target_since, self._no_target_cycles = None, 0
         if not self.cfg.explore.return_home:
             self.state = MissionState.DONE
             log.info("no reachable frontier left: mission done")

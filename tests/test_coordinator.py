@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agents.coordinator import Coordinator
+from agents.coordinator import END_CONFIRM_CYCLES, EXCLUDE_S, REACHED_GRACE_S, Coordinator
 from polyswarm.config import Config
 from polyswarm.explore import Strategy, assign
 from polyswarm.polymap import GridPolyMap
@@ -91,6 +91,14 @@ def test_coordinator_sends_one_robot_to_the_frontier_and_ends_when_it_closes():
     c.cycle()
     c.now = 1.0 + Config().explore.end_confirm_s
     out = c.cycle()
+    # one late cycle is not enough: a loaded coordinator's map may lag the robots
+    assert c.state == MissionState.EXPLORING
+    cycles = 2
+    while c.state == MissionState.EXPLORING and cycles < 10:
+        c.now += 0.1
+        out = c.cycle()
+        cycles += 1
+    assert cycles == END_CONFIRM_CYCLES  # cycles in a row without a reachable target
     assert c.state == MissionState.RETURNING
     homes = {rid: a.goal for rid, a in out.assignments.items()}
     assert homes == {"r1": (1.0, 1.0), "r2": (2.0, 1.0)}
@@ -112,6 +120,50 @@ def test_a_robot_that_leaves_frees_its_target_and_keeps_its_map():
     out = c.cycle()
     assert set(out.assignments) == {"r1"}
     assert c.merged.explored_area() == pytest.approx(area)  # nothing r2 mapped is lost
+
+
+def test_the_mission_does_not_end_while_its_last_target_is_only_excluded():
+    c = coordinator(1)
+    feed(c, "r1", corridor_map(open_end=True), 0.1)
+    c.now = 1.0
+    c.cycle()
+    a = c.robots["r1"].assignment
+    c.on_status("r1", c.now, RobotStatus(RobotState.NAVIGATING, a.target))
+    c.on_status("r1", c.now, RobotStatus(RobotState.STUCK, a.target))
+    for _ in range(10):  # failed once: excluded for a while, neither sent nor given up
+        c.now += 1.0
+        out = c.cycle()
+        assert c.state == MissionState.EXPLORING
+        assert "r1" not in out.assignments or out.assignments["r1"].kind != AssignmentKind.EXPLORE
+    c.now += EXCLUDE_S
+    out = c.cycle()
+    assert out.assignments["r1"].kind == AssignmentKind.EXPLORE  # tried again
+
+
+def test_a_reached_target_is_judged_on_the_map_the_robot_saw():
+    c = coordinator(1)
+    feed(c, "r1", corridor_map(open_end=True), 0.1)
+    c.now = 1.0
+    c.cycle()
+    a = c.robots["r1"].assignment
+    c.on_status("r1", 1.0, RobotStatus(RobotState.REACHED, a.target))
+    # the robot stood and looked (its poses say its map is at a newer version), but the
+    # delta with what it saw has not arrived: the target is not blamed yet
+    c.on_pose("r1", 1.0 + REACHED_GRACE_S, Pose(10.0, 1.0, 0.0, map_version=99))
+    for _ in range(3):
+        c.now += 1.0
+        c.cycle()
+    assert c.failures == {}
+    assert c.robots["r1"].assignment.target == a.target
+    # its map arrives: the frontier is still open, so now it counts as a failure
+    feed(
+        c, "r1", corridor_map(open_end=True).merge(rect(0.0, 2.0, 2.0, 4.0, (O, O, O, O))).map, 5.0
+    )
+    c.robots["r1"].announced = c.robots["r1"].map.version
+    c._check_behind(c.robots["r1"])
+    c.now += 1.0
+    c.cycle()
+    assert c.failures == {a.target: 1}
 
 
 def test_repeated_failures_blacklist_a_target():

