@@ -57,6 +57,7 @@ PROGRESS_M = 0.5  # progress towards a target: its path cost shrank by this much
 EXCLUDE_S = 30.0  # a robot that failed a target is not sent there again for this long
 RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
+GOAL_RESET_M = 2.0  # ... and if this far, progress towards it is measured afresh
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
 END_CONFIRM_CYCLES = 3  # ... and the mission ends only after this many cycles in a row
 # (simulated seconds run faster than wall seconds: a loaded coordinator may manage a single
@@ -76,6 +77,7 @@ class RobotInfo:
     sent_t: float = -math.inf
     best_cost: float = math.inf
     progress_t: float = 0.0
+    progress_goal: tuple[float, float] | None = None  # the goal best_cost was measured to
     excluded: dict[int, float] = field(default_factory=dict)  # target id -> until
     reached_t: float | None = None  # when the robot reported its target reached
     behind_since: float | None = None  # the robot's map version is ahead of ours since
@@ -185,7 +187,11 @@ class Coordinator:
                 log.info("robot %s cannot get home (%s)", rid, status.state)
             else:
                 self._failed(info, a.target, str(status.state))
-        elif status.state == RobotState.REACHED and a.kind == AssignmentKind.EXPLORE:
+        elif (
+            status.state == RobotState.REACHED
+            and a.kind == AssignmentKind.EXPLORE
+            and info.reached_t is None  # the first report counts (looking since then)
+        ):
             # judged at the next cycles: a frontier still open after the robot stood
             # there and looked at it counts as a failure of that target
             info.reached_t = stamp_s
@@ -422,8 +428,13 @@ class Coordinator:
                 self._failed(r, a.target, "reached, frontier still open")
                 continue
             c = costs[k, ids.index(a.target)]
-            if c < r.best_cost - PROGRESS_M:
-                r.best_cost, r.progress_t = c, self.now
+            # a frontier that retreats as the robot drives (down a long corridor) moves
+            # its goal: the cost to the new goal is a new baseline, not a lack of progress
+            moved = (
+                r.progress_goal is not None and math.dist(r.progress_goal, a.goal) > GOAL_RESET_M
+            )
+            if c < r.best_cost - PROGRESS_M or moved:
+                r.best_cost, r.progress_t, r.progress_goal = c, self.now, a.goal
             elif self.now - r.progress_t > timeout:
                 self._failed(r, a.target, f"no progress for {timeout:.0f} s")
 

@@ -222,8 +222,14 @@ class RobotAgent:
             self.stats.keyframes += 1
             self.stats.slam_ms.append(step.timings_ms.get("total", 0.0))
         out.delta = step.delta
-        # 3. navigation: replan as the map grows
-        if self.assignment is not None and self.assignment.kind != AssignmentKind.STOP:
+        # 3. navigation: replan as the map grows (at the goal, wait for the next order:
+        #    a replan there would report the goal reached again and again)
+        at_goal = self.state in (RobotState.REACHED, RobotState.HOME)
+        if (
+            self.assignment is not None
+            and self.assignment.kind != AssignmentKind.STOP
+            and not at_goal
+        ):
             due = stamp_s - self._last_plan_t >= REPLAN_PERIOD_S
             retry = stamp_s - self._last_plan_t >= PLAN_RETRY_S
             if due or (

@@ -131,6 +131,41 @@ def test_wall_on_a_cell_border_stays_an_obstacle():
     assert total_length(pmap2, VectorType.FRONTIER) == pytest.approx(2 * 2.5 + 2 * 1.0)
 
 
+@pytest.mark.parametrize(("wall_offset_m", "sector"), [(0.01, True), (0.03, True), (0.2, False)])
+def test_a_wall_seen_a_little_apart_in_two_cells_leaves_no_frontier_between_them(
+    wall_offset_m, sector
+):
+    # a corridor along y; its wall at x = 3.6 in the cell below y = 2, at 3.6 - offset
+    # above (two keyframes, each with its own noise): the 2 m border between the cells
+    # is explored on both sides but for the offset
+    pmap = GridPolyMap(2.0).merge(rect(2.0, 0.0, 3.6, 2.0, (F, O, F, F))).map
+    pmap = pmap.merge(rect(2.0, 2.0, 3.6 - wall_offset_m, 4.0, (F, O, F, F))).map
+    s, e, _ = pmap.vectors([VectorType.FRONTIER], [(1, 0), (1, 1)])
+    on_border = np.isclose(s[:, 1], 2.0) & np.isclose(e[:, 1], 2.0)
+    border_frontier = float(np.hypot(*(e - s)[on_border].T).sum())
+    if sector:  # only a gap of a few cm: a sector (the cm across the gap are no way out)
+        assert border_frontier == pytest.approx(0.0)
+    else:  # a real 20 cm opening stays a frontier
+        assert border_frontier >= wall_offset_m - 1e-6
+    assert_well_formed(pmap)
+
+
+def test_only_the_part_of_a_border_facing_a_notch_across_it_stays_a_frontier():
+    # cell (0, 0) is explored up to its top border y = 2; the cell above lacks a
+    # triangle 0.3 m wide at that border (a corner of a keyframe's fan edge)
+    below = TypedPolygon(Ring([(0.1, 0.1), (1.9, 0.1), (1.9, 2.0), (0.1, 2.0)], [O, O, F, O]))
+    above = TypedPolygon(
+        Ring([(0.1, 2.0), (1.5, 2.0), (1.8, 2.3), (1.9, 2.3), (1.9, 3.9), (0.1, 3.9)], [F] * 6)
+    )
+    pmap = GridPolyMap(2.0).merge(below).map.merge(above).map
+    s, e, _ = pmap.vectors([VectorType.FRONTIER], [(0, 0)])
+    # before nodes at the neighbour's corners, the whole 1.8 m border was a frontier
+    assert float(np.hypot(*(e - s).T).sum()) == pytest.approx(0.4)  # 1.5 .. 1.9
+    s, e, _ = pmap.vectors([VectorType.SECTOR], [(0, 0)])
+    assert float(np.hypot(*(e - s).T).sum()) == pytest.approx(1.4)  # 0.1 .. 1.5
+    assert_well_formed(pmap)
+
+
 def test_polygon_with_hole_keeps_the_hole():
     outer = Ring([(0.1, 0.1), (3.9, 0.1), (3.9, 3.9), (0.1, 3.9)], [O] * 4)
     hole = Ring([(1.5, 1.5), (1.5, 2.5), (2.5, 2.5), (2.5, 1.5)], [O] * 4)  # clockwise
