@@ -386,6 +386,7 @@ class Coordinator:
             self.cfg.explore.hysteresis,
             goals,
             self.cfg.explore.target_separation_m,
+            [targets[t].frontier.chain for t in ids],
         )
         for k, (r, j) in enumerate(zip(live, choice, strict=True)):
             if j is None:

@@ -22,6 +22,7 @@ from polyswarm.polymap import UNITS_PER_M, GridPolyMap, VectorType
 class FrontierSegment:
     points: np.ndarray  # (k, 2) polyline, free space on its left
     length_m: float
+    chain: int = 0  # pieces split from one chain of frontier vectors share this number
 
     @functools.cached_property
     def midpoint(self) -> np.ndarray:
@@ -114,11 +115,11 @@ def extract_frontiers(
     """
     s, e, _ = polymap.vectors([VectorType.FRONTIER])
     out = []
-    for chain in chain_vectors(s, e):
+    for n, chain in enumerate(chain_vectors(s, e)):
         pts = np.vstack([s[chain], e[chain[-1]][None, :]])
         for piece in split_polyline(pts, max_length_m) if max_length_m > 0 else [pts]:
             d = np.diff(piece, axis=0)
             length = float(np.hypot(d[:, 0], d[:, 1]).sum())
             if length >= min_length_m and length > 0:
-                out.append(FrontierSegment(piece, length))
+                out.append(FrontierSegment(piece, length, n))
     return out

@@ -28,6 +28,19 @@ def test_hungarian_minimises_the_total_cost():
     assert assign(Strategy.NEAREST, costs, [0.0, 0.0]) == [0, 0]
 
 
+def test_hungarian_sends_one_robot_per_frontier_before_a_second_to_any():
+    # targets 0 and 1 are pieces of one frontier (a corridor ahead of both robots),
+    # target 2 the only piece of another frontier, farther away
+    costs = np.array([[1.0, 2.0, 12.0], [1.5, 1.8, 11.0], [1.1, 2.2, 13.0]])
+    util = [4.0, 4.0, 4.0]
+    assert assign(Strategy.HUNGARIAN, costs[:2], util) == [0, 1]  # a pack of two
+    out = assign(Strategy.HUNGARIAN, costs[:2], util, groups=[7, 7, 9])
+    assert sorted(out) == [0, 2] and out[1] == 2  # robot 1 is cheaper to the far one
+    # a third robot: no third frontier, so it takes the remaining piece
+    out = assign(Strategy.HUNGARIAN, costs, util, groups=[7, 7, 9])
+    assert sorted(out) == [0, 1, 2] and out[1] == 2
+
+
 def test_greedy_discounts_targets_near_a_taken_one():
     costs = np.array([[1.0, 1.5, 6.0], [1.2, 1.6, 4.0]])
     goals = np.array([[0.0, 0.0], [0.5, 0.0], [20.0, 0.0]])

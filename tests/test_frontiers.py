@@ -1,7 +1,9 @@
 import numpy as np
 import pytest
 
+from polyswarm.explore import frontier_targets, sliver_frontiers
 from polyswarm.frontiers import extract_frontiers, split_polyline
+from polyswarm.navgraph import NavGraph
 from polyswarm.polymap import GridPolyMap
 from tests.conftest import F, O, rect
 
@@ -31,3 +33,19 @@ def test_split_polyline_keeps_length():
     pieces = split_polyline(pts, 2.0)
     lengths = [np.hypot(*np.diff(p, axis=0).T).sum() for p in pieces]
     assert len(pieces) == 4 and np.allclose(lengths, 1.75)
+
+
+def test_a_frontier_facing_a_sliver_of_unexplored_space_is_no_target():
+    # a 4 m x 2 m room whose top is a frontier; then explored space from 10 cm above it
+    # (a sliver of unexplored space between two keyframes' fans): nothing to see there
+    room = rect(0.2, 0.2, 3.8, 1.9, (O, O, F, O))
+    pmap = GridPolyMap(2.0).merge(room).map
+    graph = NavGraph.build(pmap, 0.3)
+    assert len(frontier_targets(pmap, graph, 0.4, 4.0)) == 1  # the top: room to explore
+    above = rect(0.2, 2.0, 3.8, 3.8, (F, O, O, O))
+    pmap = pmap.merge(above).map
+    graph = NavGraph.build(pmap, 0.3)
+    segs = extract_frontiers(pmap, 0.4, 4.0)
+    assert len(segs) == 2  # both sides of the sliver are still frontiers on the map...
+    assert sliver_frontiers(pmap, segs).all()
+    assert frontier_targets(pmap, graph, 0.4, 4.0) == []  # ... but neither is a target
