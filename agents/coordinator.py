@@ -34,7 +34,7 @@ from polyswarm.config import Config
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.explore import Reach, Strategy, Target, assign, frontier_targets
 from polyswarm.navgraph import NavGraph
-from polyswarm.polymap import GridPolyMap, MapDelta
+from polyswarm.polymap import GridPolyMap, MapDelta, MergeOptions
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta, decode_map, encode_delta, encode_map
 from protocols.messages import (
@@ -101,6 +101,10 @@ class Coordinator:
         self.robots = {rid: RobotInfo(rid, np.array(p, dtype=float)) for rid, p in robots.items()}
         self.merged = GridPolyMap(cfg.map.cell_size_m)
         self.graph = NavGraph(self.radius, cfg.map.cell_size_m)
+        # a wall seen at a grazing angle by one robot (a chord of frontier vectors just
+        # behind it) and head-on by another (an obstacle a centimetre in front) is a wall:
+        # with the exact union the chord stays the boundary and its frontier never closes
+        self._merge_options = MergeOptions(obstacle_snap_m=cfg.slam.obstacle_snap_m)
         self.targets: dict[int, Target] = {}
         # target ids differ from those of an earlier run of the coordinator (a restart):
         # robots must not take a new target for the one they already reached
@@ -249,7 +253,7 @@ class Coordinator:
 
     def _merge_batch(self, cells: list) -> None:
         try:
-            self.merged = self.merged.merge_cells(cells).map
+            self.merged = self.merged.merge_cells(cells, self._merge_options).map
             return
         except PolyswarmError as e:
             if len(cells) == 1:

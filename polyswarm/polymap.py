@@ -390,11 +390,13 @@ class GridPolyMap:
             pieces[~inside] = _clip_to_cells(geom, boxes[~inside], expected)
         return self._merge_pieces(idxs, pieces, src_starts, src_ends, options)
 
-    def merge_cells(self, cells: Iterable[Cell]) -> MergeResult:
+    def merge_cells(
+        self, cells: Iterable[Cell], options: MergeOptions | None = None
+    ) -> MergeResult:
         """Merge cells of other maps on the same grid (the union of all the maps).
 
         Several cells may share an index (cells of several robots): their regions are
-        united first."""
+        united first. ``options`` as for ``merge`` (default: the exact union)."""
         cells = [c for c in cells if c.polygons]
         for c in cells:
             if abs(c.size - self.cell_size) > 1e-9:
@@ -419,7 +421,7 @@ class GridPolyMap:
         obstacle = [c.vectors_of_type(VectorType.OBSTACLE) for c in cells]
         starts = np.concatenate([o[0] for o in obstacle])
         ends = np.concatenate([o[1] for o in obstacle])
-        return self._merge_pieces(idxs, pieces, starts, ends)
+        return self._merge_pieces(idxs, pieces, starts, ends, options)
 
     def _candidate_cells(self, bounds) -> list[CellIndex]:
         s = self.cell_size

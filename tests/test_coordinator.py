@@ -10,7 +10,7 @@ import pytest
 from agents.coordinator import END_CONFIRM_CYCLES, EXCLUDE_S, REACHED_GRACE_S, Coordinator
 from polyswarm.config import Config
 from polyswarm.explore import Strategy, assign
-from polyswarm.polymap import GridPolyMap
+from polyswarm.polymap import GridPolyMap, VectorType
 from protocols.mapcodec import decode_delta, encode_delta
 from protocols.messages import AssignmentKind, MissionState, Pose, RobotState, RobotStatus
 from tests.conftest import F, O, rect
@@ -211,3 +211,20 @@ def test_cells_of_two_robots_in_the_same_cell_are_united():
     b = GridPolyMap(2.0).merge(rect(1.0, 0.2, 1.8, 1.8, (O, O, O, F))).map
     merged = GridPolyMap(2.0).merge_cells(list(a.cells.values()) + list(b.cells.values())).map
     assert merged.explored_area() == pytest.approx(0.8 * 1.6 * 2, rel=1e-6)
+
+
+def test_a_wall_chord_of_one_robot_closes_on_another_robots_wall():
+    # r1 saw the top wall at a grazing angle: a frontier chord 2 cm behind it; r2 saw
+    # the wall head-on. The merged map has a wall there, and no frontier to visit.
+    chord = GridPolyMap(2.0).merge(rect(0.1, 0.1, 3.9, 1.52, (O, O, F, O))).map
+    wall = GridPolyMap(2.0).merge(rect(0.1, 0.1, 3.9, 1.50, (O, O, O, O))).map
+    exact = GridPolyMap(2.0).merge_cells(list(chord.cells.values()) + list(wall.cells.values()))
+    s, e, _ = exact.map.vectors([VectorType.FRONTIER])
+    assert np.hypot(*(e - s).T).sum() == pytest.approx(3.8)  # the exact union keeps it
+    c = coordinator(2)
+    feed(c, "r1", chord, 0.1)
+    feed(c, "r2", wall, 0.2)
+    c.cycle()
+    s, e, _ = c.merged.vectors([VectorType.FRONTIER])
+    assert np.hypot(*(e - s).T).sum() == pytest.approx(0.0, abs=1e-6)
+    assert c.merged.explored_area() == pytest.approx(3.8 * 1.42)  # nothing lost
