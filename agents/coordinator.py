@@ -298,9 +298,11 @@ class Coordinator:
                 if not reachable.any():
                     if self._no_target_since is None:
                         self._no_target_since = self.now
-                    # every robot's map merged up to what it announced: nothing in flight
+                    # every robot's map merged up to what it announced: nothing in flight;
+                    # and some robot on the graph (not one at the tip of its first scan)
                     in_flight = any(r.behind_since is not None for r in live)
-                    self._no_target_cycles += 0 if in_flight else 1
+                    lost = all(s is None for s in reach.sources)
+                    self._no_target_cycles += 0 if in_flight or lost else 1
                     if (
                         self.now - self._no_target_since >= self.cfg.explore.end_confirm_s
                         and self._no_target_cycles >= END_CONFIRM_CYCLES

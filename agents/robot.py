@@ -65,6 +65,11 @@ PEER_FRESH_S = 2.0
 FACING_RAD = 0.3  # at the goal, turn until the frontier is this close to straight ahead
 UNREACHABLE_AFTER_S = 3.0  # planning must fail this long before a target is unreachable
 PLAN_RETRY_S = 0.5  # ... retried this often meanwhile
+# At start a robot turns in place this far before anything else: a 270 degree lidar
+# leaves a wedge behind the robot unseen, with the robot at its tip, so a lone robot
+# has no room for its disc in its first map (measured: one robot on the thesis' loop
+# could reach no frontier and the mission ended after 7 s)
+START_TURN_RAD = math.pi
 SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
 
@@ -128,6 +133,7 @@ class RobotAgent:
         self._yield_until: float | None = None
         self._blocked_by = ""
         self._resume = False
+        self._turn_left_rad = START_TURN_RAD
         self.stats = AgentStats()
         self.bytes_sent = 0  # maintained by the transport
         self.journaled = 0  # deltas persisted since the last snapshot (0: none yet)
@@ -217,6 +223,7 @@ class RobotAgent:
             return out
         # 2. PolySLAM: pose, and on keyframes the map delta
         step = self.slam.process(scan, odom)
+        turned = abs(math.remainder(step.pose[2] - self.pose[2], 2 * math.pi))
         self.pose = step.pose
         if step.keyframe:
             self.stats.keyframes += 1
@@ -244,6 +251,9 @@ class RobotAgent:
         out.cmd = (cmd.v_mps, cmd.w_radps)
         if self._facing:
             out.cmd = self._face_frontier()
+        if self._turn_left_rad > 0:  # the start turn comes first
+            self._turn_left_rad -= turned
+            out.cmd = (0.0, 0.8 * self.cfg.sim.robot.max_angular_radps)
         # 5. state for the coordinator; two robots blocking each other: one gives way
         if self._yield_until is not None:
             self._end_yield(cmd.state, stamp_s)
