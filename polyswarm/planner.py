@@ -68,7 +68,9 @@ class Planner:
     def plan(self, start, goal) -> Path:
         start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
         s_node = node_of(self.map, *start)
-        if s_node is None:
+        if s_node is None and not self._nodes_near(start):
+            # (a robot standing in a sliver the map left unexplored is on free space:
+            # it joins the graph nearby, like a start in a piece too tight for it)
             raise PlanningError(f"start {tuple(start)} is not in explored free space")
         g_node = node_of(self.map, *goal)
         if g_node is None:
@@ -95,10 +97,15 @@ class Planner:
             f"no path with {self.radius} m clearance from {tuple(start)} to {tuple(goal)}"
         )
 
-    def _entries(self, node: NodeId, p: np.ndarray) -> dict[NodeId, tuple[float, np.ndarray]]:
+    def _entries(
+        self, node: NodeId | None, p: np.ndarray
+    ) -> dict[NodeId, tuple[float, np.ndarray]]:
         """Graph nodes a point joins: its own piece's, else those within ``JOIN_M``."""
-        if self.graph.has_node(node):
+        if node is not None and self.graph.has_node(node):
             return {node: (0.0, p)}
+        return self._nodes_near(p)
+
+    def _nodes_near(self, p: np.ndarray) -> dict[NodeId, tuple[float, np.ndarray]]:
         out = {}
         for c in self.map.cells_within(p[0], p[1], JOIN_M):
             cg = self.graph.cells.get(c)
@@ -154,7 +161,8 @@ class Planner:
     # -- 2./3. the taut path in the sleeve ------------------------------------------------
 
     def _taut(self, nodes, start, goal, ends=()):
-        pieces = list(dict.fromkeys([*nodes, *ends]))  # the start's and goal's pieces too
+        # the start's and goal's pieces too (a start in an unexplored sliver has none)
+        pieces = list(dict.fromkeys([*nodes, *(e for e in ends if e is not None)]))
         polys = [shapely.Polygon(piece_polygon(self.map, n)) for n in pieces]
         sleeve = shapely.union_all(polys, grid_size=1e-6)
         x0, y0, x1, y1 = sleeve.bounds

@@ -78,6 +78,18 @@ def test_a_goal_in_unexplored_space_is_refused():
         planner.plan((6, 4), (1, 1))
 
 
+def test_a_robot_standing_in_an_unexplored_sliver_still_plans():
+    # the tip of a start scan's blind wedge can stay a thin unexplored hole in the map,
+    # right where the robot stands (measured on the loop: one robot never moved)
+    outer = Ring([(0, 0), (2, 0), (2, 8), (10, 8), (10, 10), (0, 10)], [O] * 6)
+    sliver = Ring([(0.9, 1.0), (0.9, 1.3), (0.92, 1.3), (0.92, 1.0)], [O] * 4)  # clockwise
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(outer, (sliver,))).map
+    assert not pmap.is_free(0.91, 1.1)
+    path = Planner(pmap, NavGraph.build(pmap, R)).plan((0.91, 1.1), (9, 9))
+    assert np.allclose(path.points[-1], (9, 9))
+    assert path.length_m < 8.0 + 9.0  # about (1, 1) -> (1, 9) -> (9, 9)
+
+
 def test_graph_is_much_smaller_than_the_pieces_and_updates_incrementally():
     pmap = l_corridor()
     graph = NavGraph.build(pmap, R)
