@@ -11,8 +11,9 @@ a robot reached or failed its target, joined or left):
   4. failures: unreachable, stuck, or no progress for a timeout count against a
      target; after ``blacklist_after_failures`` it is blacklisted. A target reached
      whose frontier is still there counts as a failure;
-  5. mission end: no reachable target for ``end_confirm_s`` -> robots return to their
-     start poses -> done.
+  5. mission end: no reachable target for ``end_confirm_s`` and ``END_CONFIRM_CYCLES``
+     cycles in a row, with every robot's map merged -> robots return to their start
+     poses -> done.
 Robot map deltas are applied to that robot's copy of its map as they arrive (a gap
 fetches the robot's full map); the changed cells of all robots are merged into the
 global map in one batch (``flush``) every ``MERGE_PERIOD_S`` and before each cycle, so
@@ -59,9 +60,10 @@ RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
 GOAL_RESET_M = 2.0  # ... and if this far, progress towards it is measured afresh
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
-END_CONFIRM_CYCLES = 3  # ... and the mission ends only after this many cycles in a row
-# (simulated seconds run faster than wall seconds: a loaded coordinator may manage a single
-# cycle in end_confirm_s, and one cycle on a lagging map must not end a mission)
+# no reachable target for this many cycles in a row (besides explore.end_confirm_s) ends
+# the mission: simulated seconds run faster than wall seconds, a loaded coordinator may
+# manage a single cycle in end_confirm_s, and one cycle on a lagging map must not end it
+END_CONFIRM_CYCLES = 3
 MERGE_PERIOD_S = 1.0  # robots' changed cells are merged at least this often (batched)
 
 

@@ -70,6 +70,7 @@ PLAN_RETRY_S = 0.5  # ... retried this often meanwhile
 # has no room for its disc in its first map (measured: one robot on the thesis' loop
 # could reach no frontier and the mission ended after 7 s)
 START_TURN_RAD = math.pi
+START_TURN_MAX_S = 10.0  # ... but no longer than this (a robot whose odometry shows no turn)
 SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
 
@@ -134,6 +135,7 @@ class RobotAgent:
         self._blocked_by = ""
         self._resume = False
         self._turn_left_rad = START_TURN_RAD
+        self._turn_until_s: float | None = None
         self.stats = AgentStats()
         self.bytes_sent = 0  # maintained by the transport
         self.journaled = 0  # deltas persisted since the last snapshot (0: none yet)
@@ -252,7 +254,11 @@ class RobotAgent:
         if self._facing:
             out.cmd = self._face_frontier()
         if self._turn_left_rad > 0:  # the start turn comes first
+            if self._turn_until_s is None:
+                self._turn_until_s = stamp_s + START_TURN_MAX_S
             self._turn_left_rad -= turned
+            if stamp_s >= self._turn_until_s:
+                self._turn_left_rad = 0.0
             out.cmd = (0.0, 0.8 * self.cfg.sim.robot.max_angular_radps)
         # 5. state for the coordinator; two robots blocking each other: one gives way
         if self._yield_until is not None:

@@ -1,12 +1,14 @@
 """Frontier-based exploration: targets, path costs and assignment strategies.
 
 * ``frontier_targets``: the merged map's frontier vectors chained into segments, each
-  with a goal point in explored free space from which the robot sees the frontier;
+  with a goal point in explored free space from which the robot sees the frontier
+  (segments facing a mere sliver of unexplored space are left out);
 * ``path_costs``: shortest-path lengths over the navigation graph from every robot to
   every goal (one Dijkstra per robot, scipy);
 * ``assign``: which robot goes where, by strategy:
   - ``hungarian``: optimal one-to-one assignment of robots to targets minimising
-    ``cost - utility`` (scipy ``linear_sum_assignment``), targets spread apart;
+    ``cost - utility`` (scipy ``linear_sum_assignment``), one robot per frontier chain
+    before a second to any (given the targets' chains);
   - ``greedy``: Burgard-style sequential cost-utility with utility discounted around
     targets already taken;
   - ``nearest``: explore_lite-style, every robot its own best target, no coordination.
@@ -43,8 +45,8 @@ UNREACHABLE = math.inf
 # A frontier with explored space this close behind it (on its unexplored side) along
 # most (SLIVER_SHARE) of its length borders a sliver, not unexplored space: the thin
 # leftovers of keyframe fans, which walls keep from being filled (MergeOptions
-# min_growth_m). Looking at them closes nothing; measured on the thesis' loop, 3 robots
-# spent most of their time driving to such 0.5 m pieces in the middle of corridors.
+# min_growth_m). Looking at them closes nothing; on the thesis' loop, 3 robots were sent
+# again and again to such 0.5 m pieces in the middle of corridors.
 SLIVER_PROBE_M = 0.15
 SLIVER_SHARE = 0.8
 PROBE_SPACING_M = 0.25  # probe points along a frontier at most this far apart
