@@ -430,7 +430,7 @@ class Coordinator:
             a = r.assignment
             if a is None or a.kind != AssignmentKind.EXPLORE or a.target not in ids:
                 continue
-            if r.reached_t is not None and self._looked(r):
+            if self._looked(r):
                 # the robot stood there and looked; another look (from another goal, as
                 # the map has grown meanwhile) may still close it: a failure, not a verdict
                 r.reached_t = None

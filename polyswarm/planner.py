@@ -67,16 +67,16 @@ class Planner:
 
     def plan(self, start, goal) -> Path:
         start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+        # a start or goal in a piece too tight for the robot joins the graph nearby; so
+        # does a robot standing in a sliver the map left unexplored (it is on free space)
         s_node = node_of(self.map, *start)
-        if s_node is None and not self._nodes_near(start):
-            # (a robot standing in a sliver the map left unexplored is on free space:
-            # it joins the graph nearby, like a start in a piece too tight for it)
+        sources = self._entries(s_node, start)
+        if s_node is None and not sources:
             raise PlanningError(f"start {tuple(start)} is not in explored free space")
         g_node = node_of(self.map, *goal)
         if g_node is None:
             raise PlanningError(f"goal {tuple(goal)} is in unexplored space (or in an obstacle)")
-        # a start or goal in a piece too tight for the robot joins the graph nearby
-        sources, targets = self._entries(s_node, start), self._entries(g_node, goal)
+        targets = self._entries(g_node, goal)
         if not sources or not targets:
             where = "start" if not sources else "goal"
             raise PlanningError(f"no room for radius {self.radius} m near the {where}")
@@ -103,9 +103,6 @@ class Planner:
         """Graph nodes a point joins: its own piece's, else those within ``JOIN_M``."""
         if node is not None and self.graph.has_node(node):
             return {node: (0.0, p)}
-        return self._nodes_near(p)
-
-    def _nodes_near(self, p: np.ndarray) -> dict[NodeId, tuple[float, np.ndarray]]:
         out = {}
         for c in self.map.cells_within(p[0], p[1], JOIN_M):
             cg = self.graph.cells.get(c)

@@ -789,32 +789,45 @@ def _node_borders(
     (the overlay keeps every vertex of both inputs on shared edges; all are on the grid,
     so the geometry does not change)."""
     new = dict(zip(idxs, regions, strict=True))
+    coords: dict[CellIndex, np.ndarray] = {}  # each region's vertices, fetched once
+
+    def vertices(ix: CellIndex) -> np.ndarray:
+        if ix not in coords:
+            g = new.get(ix)
+            if g is None:
+                c = old_cells.get(ix)
+                g = c.region if c is not None else None
+            coords[ix] = np.zeros((0, 2)) if g is None else shapely.get_coordinates(g)
+        return coords[ix]
+
     ks, boxes = [], []
     for k, (i, j) in enumerate(idxs):
-        if shapely.is_empty(regions[k]):
+        own = vertices((i, j))
+        if len(own) == 0:
             continue
         x0, y0 = i * size, j * size
         x1, y1 = x0 + size, y0 + size
         # per side (bottom, right, top, left): the varying coordinate of extra vertices
         sides: list[list[float]] = [[], [], [], []]
         for side, (di, dj) in enumerate(((0, -1), (1, 0), (0, 1), (-1, 0))):
-            g = new.get((i + di, j + dj))
-            if g is None:
-                c = old_cells.get((i + di, j + dj))
-                g = c.region if c is not None else None
-            if g is None or shapely.is_empty(g):
+            xy = vertices((i + di, j + dj))
+            if len(xy) == 0:
                 continue
-            xy = shapely.get_coordinates(g)
-            line, along, lo, hi = (
-                (xy[:, 1], xy[:, 0], x0, x1),
-                (xy[:, 0], xy[:, 1], y0, y1),
-                (xy[:, 1], xy[:, 0], x0, x1),
-                (xy[:, 0], xy[:, 1], y0, y1),
-            )[side]
+            # across (the coordinate fixed on this side) and along it
+            c_across, c_along = (1, 0) if side % 2 == 0 else (0, 1)
+            line, along = xy[:, c_across], xy[:, c_along]
+            lo, hi = (x0, x1) if side % 2 == 0 else (y0, y1)
             at = (y0, x1, y1, x0)[side]
             on = (np.abs(line - at) <= BORDER_TOL_M) & (along > lo + BORDER_TOL_M)
             on &= along < hi - BORDER_TOL_M
-            sides[side] = sorted(set(along[on].tolist()))
+            if not on.any():
+                continue
+            # vertices the region already has there need no node
+            have = own[np.abs(own[:, c_across] - at) <= BORDER_TOL_M, c_along]
+            extra = along[on]
+            if len(have):
+                extra = extra[np.abs(extra[:, None] - have[None, :]).min(axis=1) > BORDER_TOL_M]
+            sides[side] = sorted(set(extra.tolist()))
         if not any(sides):
             continue
         ring = [(x0, y0)] + [(x, y0) for x in sides[0]]

@@ -12,7 +12,14 @@ from polyswarm.config import Config
 from polyswarm.explore import Strategy, assign
 from polyswarm.polymap import GridPolyMap, VectorType
 from protocols.mapcodec import decode_delta, encode_delta
-from protocols.messages import AssignmentKind, MissionState, Pose, RobotState, RobotStatus
+from protocols.messages import (
+    Assignment,
+    AssignmentKind,
+    MissionState,
+    Pose,
+    RobotState,
+    RobotStatus,
+)
 from tests.conftest import F, O, rect
 
 INF = math.inf
@@ -135,12 +142,17 @@ def test_a_robot_that_leaves_frees_its_target_and_keeps_its_map():
     assert c.merged.explored_area() == pytest.approx(area)  # nothing r2 mapped is lost
 
 
-def test_the_mission_does_not_end_while_its_last_target_is_only_excluded():
+def on_its_way() -> tuple[Coordinator, Assignment]:
+    """One robot, a corridor with an open end, and the robot's assignment to it."""
     c = coordinator(1)
     feed(c, "r1", corridor_map(open_end=True), 0.1)
     c.now = 1.0
     c.cycle()
-    a = c.robots["r1"].assignment
+    return c, c.robots["r1"].assignment
+
+
+def test_the_mission_does_not_end_while_its_last_target_is_only_excluded():
+    c, a = on_its_way()
     c.on_status("r1", c.now, RobotStatus(RobotState.NAVIGATING, a.target))
     c.on_status("r1", c.now, RobotStatus(RobotState.STUCK, a.target))
     for _ in range(10):  # failed once: excluded for a while, neither sent nor given up
@@ -154,26 +166,19 @@ def test_the_mission_does_not_end_while_its_last_target_is_only_excluded():
 
 
 def test_a_reached_target_is_judged_on_the_map_the_robot_saw():
-    c = coordinator(1)
-    feed(c, "r1", corridor_map(open_end=True), 0.1)
-    c.now = 1.0
-    c.cycle()
-    a = c.robots["r1"].assignment
+    c, a = on_its_way()
+    seen = corridor_map(open_end=True).merge(rect(0.0, 2.0, 2.0, 4.0, (O, O, O, O))).map
     c.on_status("r1", 1.0, RobotStatus(RobotState.REACHED, a.target))
-    # the robot stood and looked (its poses say its map is at a newer version), but the
+    # the robot stood and looked (its pose says its map is at the newer version), but the
     # delta with what it saw has not arrived: the target is not blamed yet
-    c.on_pose("r1", 1.0 + REACHED_GRACE_S, Pose(10.0, 1.0, 0.0, map_version=99))
+    c.on_pose("r1", 1.0 + REACHED_GRACE_S, Pose(10.0, 1.0, 0.0, map_version=seen.version))
     for _ in range(3):
         c.now += 1.0
         c.cycle()
     assert c.failures == {}
     assert c.robots["r1"].assignment.target == a.target
     # its map arrives: the frontier is still open, so now it counts as a failure
-    feed(
-        c, "r1", corridor_map(open_end=True).merge(rect(0.0, 2.0, 2.0, 4.0, (O, O, O, O))).map, 5.0
-    )
-    c.robots["r1"].announced = c.robots["r1"].map.version
-    c._check_behind(c.robots["r1"])
+    feed(c, "r1", seen, 5.0)
     c.now += 1.0
     c.cycle()
     assert c.failures == {a.target: 1}
