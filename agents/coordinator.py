@@ -33,7 +33,7 @@ import numpy as np
 from agents import persist
 from polyswarm.config import Config
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
-from polyswarm.explore import Reach, Strategy, Target, assign, frontier_targets
+from polyswarm.explore import GraphIndex, Reach, Strategy, Target, assign, frontier_targets
 from polyswarm.navgraph import NavGraph
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOptions
 from protocols.keys import SwarmKeys
@@ -103,6 +103,7 @@ class Coordinator:
         self.robots = {rid: RobotInfo(rid, np.array(p, dtype=float)) for rid, p in robots.items()}
         self.merged = GridPolyMap(cfg.map.cell_size_m)
         self.graph = NavGraph(self.radius, cfg.map.cell_size_m)
+        self._index: GraphIndex | None = None  # the graph as a matrix, until it changes
         # a wall seen at a grazing angle by one robot (a chord of frontier vectors just
         # behind it) and head-on by another (an obstacle a centimetre in front) is a wall:
         # with the exact union the chord stays the boundary and its frontier never closes
@@ -142,6 +143,7 @@ class Coordinator:
                 raise MapError("persisted merged map has another cell size than the config")
             self.merged = merged
             self.graph = NavGraph.build(merged, self.radius)
+            self._index = None
         for rid, pmap in robot_maps.items():
             self.robot(rid).map = pmap
 
@@ -250,6 +252,7 @@ class Coordinator:
         if self.merged.version != base:
             delta = self.merged.delta_since(base)
             self.graph.update(self.merged, {c.index for c in delta.cells})
+            self._index = None
         self._pending_ms += (time.perf_counter() - t0) * 1e3
         return delta
 
@@ -282,7 +285,11 @@ class Coordinator:
             log.info("exploring with %s", [r.id for r in live])
         if self.state in (MissionState.EXPLORING, MissionState.RETURNING) and live:
             # 1. shortest paths from every robot over the navigation graph
-            reach = Reach.from_robots(self.graph, self.merged, [r.pose[:2] for r in live])
+            if self._index is None:
+                self._index = GraphIndex.build(self.graph)
+            reach = Reach.from_robots(
+                self.graph, self.merged, [r.pose[:2] for r in live], self._index
+            )
             # 2. frontier targets with goal points the robots can reach, and their costs
             targets = self._update_targets(reach)
             ids = list(targets)

@@ -30,7 +30,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from polyswarm.frontiers import FrontierSegment, extract_frontiers, point_along
+from polyswarm.frontiers import FrontierSegment, extract_frontiers, points_along
 from polyswarm.navgraph import NavGraph, clear_of, node_of
 from polyswarm.polymap import GridPolyMap, VectorType
 
@@ -97,21 +97,21 @@ def frontier_targets(
     if not segs:
         return []
     cands, owner = [], []
+    along, offsets = np.array(GOAL_ALONG), np.array(GOAL_OFFSETS_M)
     for k, seg in enumerate(segs):
         d = seg.end - seg.start
         n = np.hypot(*d)
         if n < 1e-9:
             continue
         left = np.array([-d[1], d[0]]) / n  # explored space is on the left
-        for f in GOAL_ALONG:
-            p = point_along(seg.points, f * seg.length_m)
-            for off in GOAL_OFFSETS_M:
-                cands.append(p + off * left)
-                owner.append(k)
+        at = points_along(seg.points, along * seg.length_m)
+        # in order of preference: each point along, each offset from it
+        cands.append((at[:, None, :] + offsets[None, :, None] * left).reshape(-1, 2))
+        owner.append(np.full(len(along) * len(offsets), k))
     if not cands:
         return []
-    cands = np.array(cands)
-    owner = np.array(owner)
+    cands = np.concatenate(cands)
+    owner = np.concatenate(owner)
     free = pmap.is_free_many(cands)
     cells = {pmap.cell_index(*c) for c in cands[free]}
     obstacle_ok = np.zeros(len(cands), dtype=bool)

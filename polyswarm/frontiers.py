@@ -47,6 +47,14 @@ def point_along(points: np.ndarray, distance: float) -> np.ndarray:
     return points[k] + np.clip(t, 0.0, 1.0) * seg[k]
 
 
+def points_along(points: np.ndarray, distances: np.ndarray) -> np.ndarray:
+    """The points ``distances`` (metres, clipped to the polyline) along a polyline."""
+    seg = np.diff(points, axis=0)
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(seg[:, 0], seg[:, 1]))])
+    d = np.clip(np.asarray(distances, dtype=float), 0.0, cum[-1])
+    return np.stack([np.interp(d, cum, points[:, 0]), np.interp(d, cum, points[:, 1])], axis=1)
+
+
 def chain_vectors(starts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
     """Chain directed vectors end-to-start into polylines (index lists)."""
     n = len(starts)

@@ -60,11 +60,26 @@ class Piece:
 class CellPartition:
     pieces: tuple[Piece, ...]
 
+    @cached_property
+    def _edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every piece's vectors in one array (start, direction) and each piece's offset."""
+        if not self.pieces:
+            z = np.zeros((0, 2))
+            return z, z, np.zeros(0, dtype=np.int64)
+        a = np.concatenate([p.xy for p in self.pieces])
+        b = np.concatenate([np.roll(p.xy, -1, axis=0) for p in self.pieces])
+        offsets = np.cumsum([0] + [len(p.xy) for p in self.pieces[:-1]])
+        return a, b - a, offsets
+
     def locate(self, x: float, y: float) -> int | None:
+        a, d, offsets = self._edges
+        if len(a):  # all pieces at once: inside a convex piece is left of all its vectors
+            cross = d[:, 0] * (y - a[:, 1]) - d[:, 1] * (x - a[:, 0])
+            inside = np.nonzero(np.minimum.reduceat(cross, offsets) >= -1e-9)[0]
+            if len(inside):
+                return int(inside[0])
         best, best_d = None, np.inf
         for k, p in enumerate(self.pieces):
-            if p.contains(x, y, tol=1e-9):
-                return k
             # points on a shared vector may miss both pieces by rounding: take the closest
             d = _outside_distance(p.xy, x, y)
             if d < best_d:
@@ -132,6 +147,17 @@ def _triangulate(xy: np.ndarray, ring_ends: np.ndarray, area: float) -> np.ndarr
     return np.array(out, dtype=np.int64).reshape(-1, 3)
 
 
+def _convex(xy: np.ndarray) -> bool:
+    """A counter-clockwise ring turning left (or straight on) at every vertex, on the
+    integer grid, with distinct vertices: the triangulation would rebuild it as it is."""
+    q = np.rint(xy * UNITS_PER_M).astype(np.int64)
+    d = np.concatenate([q[1:], q[:1]]) - q
+    e = np.concatenate([d[1:], d[:1]])
+    if (d == 0).all(axis=1).any():
+        return False
+    return bool((d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0] >= 0).all())
+
+
 def _tri_area(xy: np.ndarray, tri: np.ndarray) -> np.ndarray:
     a, b, c = xy[tri[:, 0]], xy[tri[:, 1]], xy[tri[:, 2]]
     return 0.5 * (
@@ -140,6 +166,9 @@ def _tri_area(xy: np.ndarray, tri: np.ndarray) -> np.ndarray:
 
 
 def _partition_polygon(rings, offset: int) -> list[Piece]:
+    if len(rings) == 1 and _convex(rings[0].xy):  # already one piece (a common case)
+        r = rings[0]
+        return [Piece(r.xy.copy(), r.types.copy(), np.full(len(r), NO_LINK, dtype=np.int64))]
     xy = np.concatenate([r.xy for r in rings])
     types = np.concatenate([r.types for r in rings])
     sizes = np.array([len(r) for r in rings])

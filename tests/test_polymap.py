@@ -90,6 +90,20 @@ def test_obstacle_wins_over_a_coincident_frontier():
     assert not c.changed
 
 
+def test_cells_inside_explored_space_change_nothing_unless_they_see_a_wall():
+    big = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.6, 1.6, (F, F, F, F))).map
+    # another robot's smaller view, all inside: merged away without a change
+    inner = GridPolyMap(2.0).merge(rect(0.5, 0.5, 1.2, 1.2, (O, O, O, O))).map
+    r = big.merge_cells(list(inner.cells.values()))
+    assert not r.changed and r.map is big
+    # a view inside whose wall lies on a piece of the map's frontier: not skipped, the
+    # frontier under the wall becomes an obstacle
+    wall = GridPolyMap(2.0).merge(rect(0.5, 0.2, 1.0, 1.0, (O, F, F, F))).map
+    r = big.merge_cells(list(wall.cells.values()))
+    assert r.changed
+    assert total_length(r.map, VectorType.OBSTACLE) >= 0.5
+
+
 def test_merging_the_same_keyframe_twice_changes_nothing():
     kf = star((1.3, 0.7), np.linspace(1.0, 3.0, 40), [O] * 20 + [F] * 20)
     r1 = GridPolyMap(2.0).merge(kf)
