@@ -33,7 +33,15 @@ import numpy as np
 from agents import persist
 from polyswarm.config import Config
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
-from polyswarm.explore import GraphIndex, Reach, Strategy, Target, assign, frontier_targets
+from polyswarm.explore import (
+    GraphIndex,
+    Reach,
+    Strategy,
+    Target,
+    TargetCache,
+    assign,
+    frontier_targets,
+)
 from polyswarm.navgraph import NavGraph
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOptions
 from protocols.keys import SwarmKeys
@@ -109,6 +117,7 @@ class Coordinator:
         # with the exact union the chord stays the boundary and its frontier never closes
         self._merge_options = MergeOptions(obstacle_snap_m=cfg.slam.obstacle_snap_m)
         self.targets: dict[int, Target] = {}
+        self._target_cache = TargetCache()  # frontier facts reused while their cells stay
         # target ids differ from those of an earlier run of the coordinator (a restart):
         # robots must not take a new target for the one they already reached
         self._next_id = int(time.time() * 10) % 1_000_000_000
@@ -361,6 +370,7 @@ class Coordinator:
             0.0,
             self.blacklist,
             reach=reach,
+            cache=self._target_cache,
         )
         # keep ids: a target near last cycle's is the same target
         old_ids = list(self.targets)

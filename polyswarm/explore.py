@@ -22,7 +22,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 
 import numpy as np
@@ -78,6 +78,7 @@ def frontier_targets(
     blacklist: list[np.ndarray] | tuple = (),
     blacklist_radius_m: float = 1.0,
     reach: Reach | None = None,
+    cache: TargetCache | None = None,
 ) -> list[Target]:
     """Frontier segments with a reachable goal point, longest first.
 
@@ -87,49 +88,29 @@ def frontier_targets(
     obstacle vector; else the nearest such node within ``FALLBACK_RADIUS_M`` that sees
     the frontier (a frontier seen through a door is looked at from the door).
     Frontiers with no goal, or near a blacklisted point, are not targets.
-    ``separation_m`` > 0 keeps one target per neighbourhood (the longest frontier)."""
+    ``separation_m`` > 0 keeps one target per neighbourhood (the longest frontier).
+    ``cache`` (kept by the caller between calls) saves recomputing segments whose
+    surroundings did not change; the result is the same with or without it."""
     usable = graph.has_node if reach is None else reach.reaches
     segs = extract_frontiers(pmap, min_length_m, max_length_m)
-    if segs:
-        segs = [
-            s for s, sliver in zip(segs, sliver_frontiers(pmap, segs), strict=True) if not sliver
-        ]
     if not segs:
         return []
-    cands, owner = [], []
-    along, offsets = np.array(GOAL_ALONG), np.array(GOAL_OFFSETS_M)
-    for k, seg in enumerate(segs):
-        d = seg.end - seg.start
-        n = np.hypot(*d)
-        if n < 1e-9:
-            continue
-        left = np.array([-d[1], d[0]]) / n  # explored space is on the left
-        at = points_along(seg.points, along * seg.length_m)
-        # in order of preference: each point along, each offset from it
-        cands.append((at[:, None, :] + offsets[None, :, None] * left).reshape(-1, 2))
-        owner.append(np.full(len(along) * len(offsets), k))
-    if not cands:
-        return []
-    cands = np.concatenate(cands)
-    owner = np.concatenate(owner)
-    free = pmap.is_free_many(cands)
-    cells = {pmap.cell_index(*c) for c in cands[free]}
-    obstacle_ok = np.zeros(len(cands), dtype=bool)
-    if free.any():
-        # clearance to obstacles only: the goal may be close to its frontier
-        st, en, _ = pmap.vectors([VectorType.OBSTACLE], _near_cells(pmap, cells))
-        obstacle_ok[free] = clear_of(cands[free], st, en, graph.radius)
+    # what depends on the map alone is reused while the cells around a segment stay
+    keys = [(s.points.tobytes(), _cells_around(pmap, s, graph.radius)) for s in segs]
+    old = cache.entries if cache is not None else {}
+    facts = [old.get(key) for key in keys]
+    todo = [k for k, f in enumerate(facts) if f is None]
+    for k, f in zip(todo, _segment_facts(pmap, [segs[k] for k in todo], graph.radius), strict=True):
+        facts[k] = f
+    if cache is not None:
+        cache.entries = dict(zip(keys, facts, strict=True))
     out = []
     black = np.array(blacklist, dtype=float).reshape(-1, 2)
     node_pts = None
-    for k, seg in enumerate(segs):
-        idx = np.nonzero((owner == k) & obstacle_ok)[0]
-        goal = None
-        for i in idx:
-            node = node_of(pmap, *cands[i])
-            if node is not None and usable(node):
-                goal = cands[i]
-                break
+    for seg, f in zip(segs, facts, strict=True):
+        if f.sliver:
+            continue
+        goal = next((p for p, node in f.goals if usable(node)), None)
         if goal is None:  # no room in front of it (a thin wedge seen through a door)
             if node_pts is None:
                 node_pts = _node_points(graph, usable)
@@ -150,6 +131,77 @@ def frontier_targets(
                 kept.append(t)
         out = kept
     return out
+
+
+@dataclass
+class TargetCache:
+    """Facts of frontier segments that depend on the map alone (sliver or not, goal
+    candidates with their graph nodes), kept from one call of ``frontier_targets`` to
+    the next for the segments whose surrounding cells did not change."""
+
+    entries: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class _SegmentFacts:
+    sliver: bool
+    goals: tuple  # ((point, node), ...): goal candidates clear of obstacles, best first
+
+
+def _cells_around(pmap: GridPolyMap, seg: FrontierSegment, radius: float) -> tuple:
+    """(cell, version) of every cell whose content the segment's facts depend on: within
+    the farthest goal candidate plus the clearance radius, and one cell more (the
+    obstacle vectors of neighbouring cells count for clearance)."""
+    m = max(GOAL_OFFSETS_M) + radius + SLIVER_PROBE_M
+    s = pmap.cell_size
+    lo = np.floor((seg.points.min(axis=0) - m) / s).astype(int) - 1
+    hi = np.floor((seg.points.max(axis=0) + m) / s).astype(int) + 1
+    cells = pmap.cells
+    return tuple(
+        (i, j, c.version)
+        for i in range(lo[0], hi[0] + 1)
+        for j in range(lo[1], hi[1] + 1)
+        if (c := cells.get((i, j))) is not None
+    )
+
+
+def _segment_facts(
+    pmap: GridPolyMap, segs: list[FrontierSegment], radius: float
+) -> list[_SegmentFacts]:
+    """Sliver test and goal candidates (offsets ``GOAL_OFFSETS_M`` into the free side at
+    ``GOAL_ALONG`` of the segment, in explored space, ``radius`` from every obstacle,
+    in a convex piece of the map), for many segments in one pass."""
+    if not segs:
+        return []
+    slivers = sliver_frontiers(pmap, segs)
+    cands, owner = [], []
+    along, offsets = np.array(GOAL_ALONG), np.array(GOAL_OFFSETS_M)
+    for k, seg in enumerate(segs):
+        d = seg.end - seg.start
+        n = np.hypot(*d)
+        if n < 1e-9 or slivers[k]:
+            continue
+        left = np.array([-d[1], d[0]]) / n  # explored space is on the left
+        at = points_along(seg.points, along * seg.length_m)
+        # in order of preference: each point along, each offset from it
+        cands.append((at[:, None, :] + offsets[None, :, None] * left).reshape(-1, 2))
+        owner.append(np.full(len(along) * len(offsets), k))
+    goals: list[list] = [[] for _ in segs]
+    if cands:
+        cands = np.concatenate(cands)
+        owner = np.concatenate(owner)
+        free = pmap.is_free_many(cands)
+        cells = {pmap.cell_index(*c) for c in cands[free]}
+        ok = np.zeros(len(cands), dtype=bool)
+        if free.any():
+            # clearance to obstacles only: the goal may be close to its frontier
+            st, en, _ = pmap.vectors([VectorType.OBSTACLE], _near_cells(pmap, cells))
+            ok[free] = clear_of(cands[free], st, en, radius)
+        for i in np.nonzero(ok)[0]:
+            node = node_of(pmap, *cands[i])
+            if node is not None:
+                goals[owner[i]].append((cands[i], node))
+    return [_SegmentFacts(bool(sl), tuple(g)) for sl, g in zip(slivers, goals, strict=True)]
 
 
 def sliver_frontiers(pmap: GridPolyMap, segs: list[FrontierSegment]) -> np.ndarray:

@@ -424,7 +424,7 @@ class GridPolyMap:
             )
             by_index.update(zip(more, united, strict=True))
         pieces = np.array([by_index.get(i, _EMPTY) for i in idxs], dtype=object)
-        obstacle = [c.vectors_of_type(VectorType.OBSTACLE) for c in cells]
+        obstacle = [c.obstacle_vectors for c in cells]
         starts = np.concatenate([o[0] for o in obstacle])
         ends = np.concatenate([o[1] for o in obstacle])
         return self._merge_pieces(idxs, pieces, starts, ends, options)
@@ -513,7 +513,10 @@ class GridPolyMap:
             )
         # a border vector must end where explored space across the border starts or ends,
         # so that only its part facing unexplored space stays a frontier
-        regions = _node_borders(idxs, regions, self.cells, self.cell_size)
+        # (only around regions that moved: the others were noded when they last changed)
+        moved = {i for i, r, o in zip(idxs, regions, old, strict=True) if r is not o}
+        need = moved | {n for i in moved for n in _neighbours(i)}
+        regions = _node_borders(idxs, regions, self.cells, self.cell_size, need)
         # obstacle sources: the new polygon's obstacle vectors and the old ones of these cells
         olds = [self.cells[i].obstacle_vectors for i in idxs if i in self.cells]
         starts = np.concatenate([src_starts.reshape(-1, 2)] + [o[0] for o in olds])
@@ -813,7 +816,11 @@ def _clip_to_cells(geom: shapely.Geometry, boxes: np.ndarray, expected_area: flo
 
 
 def _node_borders(
-    idxs: list[CellIndex], regions: np.ndarray, old_cells: Mapping[CellIndex, Cell], size: float
+    idxs: list[CellIndex],
+    regions: np.ndarray,
+    old_cells: Mapping[CellIndex, Cell],
+    size: float,
+    need: set[CellIndex] | None = None,
 ) -> np.ndarray:
     """Each region with a vertex wherever a neighbour's boundary meets their shared border.
 
@@ -821,7 +828,7 @@ def _node_borders(
     cover only part of it (a notch of the neighbour). Intersecting the region with its
     cell square carrying those extra vertices nodes the region's border edges there
     (the overlay keeps every vertex of both inputs on shared edges; all are on the grid,
-    so the geometry does not change)."""
+    so the geometry does not change). ``need``: only these cells (default: all)."""
     new = dict(zip(idxs, regions, strict=True))
     coords: dict[CellIndex, np.ndarray] = {}  # each region's vertices, fetched once
 
@@ -836,6 +843,8 @@ def _node_borders(
 
     ks, boxes = [], []
     for k, (i, j) in enumerate(idxs):
+        if need is not None and (i, j) not in need:
+            continue
         own = vertices((i, j))
         if len(own) == 0:
             continue

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from polyswarm.explore import frontier_targets, sliver_frontiers
+from polyswarm.explore import TargetCache, frontier_targets, sliver_frontiers
 from polyswarm.frontiers import extract_frontiers, split_polyline
 from polyswarm.navgraph import NavGraph
 from polyswarm.polymap import GridPolyMap
@@ -49,3 +49,30 @@ def test_a_frontier_facing_a_sliver_of_unexplored_space_is_no_target():
     assert len(segs) == 2  # both sides of the sliver are still frontiers on the map...
     assert sliver_frontiers(pmap, segs).all()
     assert frontier_targets(pmap, graph, 0.4, 4.0) == []  # ... but neither is a target
+
+
+def test_cached_targets_are_those_computed_afresh_and_follow_map_changes():
+    # two rooms 8 m apart, each with an open side; the second room then grows
+    left = rect(0.2, 0.2, 3.8, 3.8, (O, F, O, O))
+    right = rect(10.2, 0.2, 13.8, 3.8, (O, O, O, F))
+    pmap = GridPolyMap(2.0).merge(left).map.merge(right).map
+    cache = TargetCache()
+
+    def both(pmap):
+        graph = NavGraph.build(pmap, 0.3)
+        cached = frontier_targets(pmap, graph, 0.4, 4.0, cache=cache)
+        fresh = frontier_targets(pmap, graph, 0.4, 4.0)
+        assert [t.goal.tolist() for t in cached] == [t.goal.tolist() for t in fresh]
+        return cached
+
+    first = both(pmap)
+    assert len(first) == 2 and len(cache.entries) == 2
+    kept = {id(f) for f in cache.entries.values()}
+    assert len(both(pmap)) == 2  # nothing changed: every fact reused
+    assert {id(f) for f in cache.entries.values()} == kept
+    # the right room opens towards the left one: its frontier moves, the other stays
+    pmap = pmap.merge(rect(8.2, 0.2, 10.4, 3.8, (O, O, O, F))).map
+    second = both(pmap)
+    assert len(second) == 2
+    assert len({id(f) for f in cache.entries.values()} & kept) == 1
+    assert min(t.frontier.points[:, 0].min() for t in second) < 9.0
