@@ -5,8 +5,11 @@
 Runs what ``polyswarm bench explore --worlds "" --load-robots 10`` runs (10 robots on
 the maze, in one process) and prints, per coordinator cycle, the time spent merging
 robot cells, updating the navigation graph, finding frontier targets and computing
-path costs (p50 and p95 of each, milliseconds). To compare two versions side by side,
-run it from both checkouts at once (``PYTHONPATH=/path/to/other/checkout``).
+path costs (p50 and p95 of each, milliseconds), and how much work was skipped: robot
+cells that could not change the merged map, frontiers whose facts were reused. To
+compare two versions side by side, run it from both checkouts at once
+(``PYTHONPATH=/path/to/other/checkout python examples/coordinator_stages.py``; the
+counts need a version that has them).
 """
 
 from __future__ import annotations
@@ -21,8 +24,10 @@ import agents.coordinator as coordinator_module
 import polyswarm.explore as explore_module
 from polyswarm.benchmarks.inproc import explore_in_process
 from polyswarm.navgraph import NavGraph
+from polyswarm.polymap import GridPolyMap
 
 spent: dict[str, float] = defaultdict(float)  # ms per stage since the last cycle
+counts: dict[str, int] = defaultdict(int)
 state = {"in_flush": False}  # inside the coordinator's flush (merge + graph update)
 
 
@@ -42,6 +47,22 @@ def timed(owner, name: str, stage: str, only_in_flush: bool = False) -> None:
     setattr(owner, name, wrapper)
 
 
+def counted(owner, name: str, arrived: str, kept: str) -> None:
+    """Count the items ``owner.name`` gets (first list argument) and returns."""
+    inner = getattr(owner, name, None)
+    if inner is None:  # an older version without this step
+        return
+
+    def wrapper(*args, **kwargs):
+        items = next(a for a in args if isinstance(a, list))
+        out = inner(*args, **kwargs)
+        counts[arrived] += len(items)
+        counts[kept] += len(out)
+        return out
+
+    setattr(owner, name, wrapper)
+
+
 def main(sim_s: float = 60.0) -> None:
     Coordinator = coordinator_module.Coordinator
     flush = Coordinator.flush
@@ -56,8 +77,18 @@ def main(sim_s: float = 60.0) -> None:
     Coordinator.flush = flagged_flush
     timed(Coordinator, "_merge_batch", "merge")
     timed(NavGraph, "update", "graph", only_in_flush=True)
-    timed(coordinator_module, "frontier_targets", "targets")
     timed(explore_module.Reach, "costs", "costs")
+    timed(coordinator_module, "frontier_targets", "targets")
+    counted(GridPolyMap, "_cells_that_change", "robot cells", "robot cells that change")
+    counted(explore_module, "_segment_facts", "frontiers recomputed", "_")
+    extract = explore_module.extract_frontiers
+
+    def counted_extract(*args, **kwargs):  # only the coordinator looks for frontiers
+        segs = extract(*args, **kwargs)
+        counts["frontiers"] += len(segs)
+        return segs
+
+    explore_module.extract_frontiers = counted_extract
     rows: list[dict] = []
     cycle = Coordinator.cycle
 
@@ -76,6 +107,12 @@ def main(sim_s: float = 60.0) -> None:
         print(
             f"{stage:>8}: p50 {np.percentile(v, 50):6.1f} ms   p95 {np.percentile(v, 95):6.1f} ms"
         )
+    if counts["robot cells"]:
+        n, k = counts["robot cells"], counts["robot cells that change"]
+        print(f"robot cells merged: {n}, skipped as unable to change the map: {1 - k / n:.0%}")
+    if counts["frontiers recomputed"]:
+        n, k = counts["frontiers"], counts["frontiers recomputed"]
+        print(f"frontiers over all cycles: {n}, facts reused: {1 - k / n:.0%}")
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ BATCH = 150  # cells per coordinator merge (one flush of several robots' changes
 
 
 def main(path: str = "../shared/data/logs/freiburg-101-corrected.log.gz") -> None:
-    noded, plain = pm._node_borders, lambda idxs, regions, old, size: regions
+    noded, plain = pm._node_borders, lambda idxs, regions, *_: regions
     cfg = Config()
     log = read_carmen(path)
     slam_ms: dict[str, list[float]] = {"noded": [], "plain": []}

@@ -149,7 +149,7 @@ class _SegmentFacts:
 
 
 def _cells_around(pmap: GridPolyMap, seg: FrontierSegment, radius: float) -> tuple:
-    """(cell, version) of every cell whose content the segment's facts depend on: within
+    """(i, j, version) of every cell whose content the segment's facts depend on: within
     the farthest goal candidate plus the clearance radius, and one cell more (the
     obstacle vectors of neighbouring cells count for clearance)."""
     m = max(GOAL_OFFSETS_M) + radius + SLIVER_PROBE_M

@@ -39,12 +39,8 @@ class FrontierSegment:
 
 
 def point_along(points: np.ndarray, distance: float) -> np.ndarray:
-    seg = np.diff(points, axis=0)
-    L = np.hypot(seg[:, 0], seg[:, 1])
-    cum = np.concatenate([[0.0], np.cumsum(L)])
-    k = int(np.clip(np.searchsorted(cum, distance) - 1, 0, len(L) - 1))
-    t = 0.0 if L[k] == 0 else (distance - cum[k]) / L[k]
-    return points[k] + np.clip(t, 0.0, 1.0) * seg[k]
+    """The point ``distance`` (metres, clipped to the polyline) along a polyline."""
+    return points_along(points, np.array([distance]))[0]
 
 
 def points_along(points: np.ndarray, distances: np.ndarray) -> np.ndarray:

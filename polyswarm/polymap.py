@@ -406,7 +406,7 @@ class GridPolyMap:
         for c in cells:
             if abs(c.size - self.cell_size) > 1e-9:
                 raise MapError(f"cell size {c.size} m does not match the map's {self.cell_size} m")
-        cells = self._adding_something(cells, options or MergeOptions())
+        cells = self._cells_that_change(cells, options or MergeOptions())
         if not cells:
             return MergeResult(self, frozenset())
         # neighbours are touched too: their border vectors may turn from frontier to sector
@@ -429,12 +429,12 @@ class GridPolyMap:
         ends = np.concatenate([o[1] for o in obstacle])
         return self._merge_pieces(idxs, pieces, starts, ends, options)
 
-    def _adding_something(self, cells: list[Cell], opt: MergeOptions) -> list[Cell]:
+    def _cells_that_change(self, cells: list[Cell], opt: MergeOptions) -> list[Cell]:
         """The cells that can change this map. A cell whose explored space this map's cell
         already covers, with no obstacle vector along one of that cell's frontiers,
         changes nothing: the union is the old region, its vectors keep their types, and
-        no border moves. (Robots re-observing mapped space send mostly such cells: with
-        10 robots, about two thirds of the coordinator's merge batches.)"""
+        no border moves. (Robots re-observing mapped space send mostly such cells:
+        ``examples/coordinator_stages.py`` counts them in a 10-robot run.)"""
         mine = [self.cells.get(c.index) for c in cells]
         have = np.array([m is not None for m in mine], dtype=bool)
         if not have.any():
@@ -815,12 +815,23 @@ def _clip_to_cells(geom: shapely.Geometry, boxes: np.ndarray, expected_area: flo
     return out
 
 
+def _region_at(
+    ix: CellIndex, new: Mapping[CellIndex, shapely.Geometry], old_cells: Mapping[CellIndex, Cell]
+) -> shapely.Geometry | None:
+    """A cell's region during a merge: the new one if merged now, else the map's (or None)."""
+    g = new.get(ix)
+    if g is None:
+        c = old_cells.get(ix)
+        g = c.region if c is not None else None
+    return g
+
+
 def _node_borders(
     idxs: list[CellIndex],
     regions: np.ndarray,
     old_cells: Mapping[CellIndex, Cell],
     size: float,
-    need: set[CellIndex] | None = None,
+    need: set[CellIndex],
 ) -> np.ndarray:
     """Each region with a vertex wherever a neighbour's boundary meets their shared border.
 
@@ -828,22 +839,19 @@ def _node_borders(
     cover only part of it (a notch of the neighbour). Intersecting the region with its
     cell square carrying those extra vertices nodes the region's border edges there
     (the overlay keeps every vertex of both inputs on shared edges; all are on the grid,
-    so the geometry does not change). ``need``: only these cells (default: all)."""
+    so the geometry does not change). Only the cells in ``need`` are noded."""
     new = dict(zip(idxs, regions, strict=True))
     coords: dict[CellIndex, np.ndarray] = {}  # each region's vertices, fetched once
 
     def vertices(ix: CellIndex) -> np.ndarray:
         if ix not in coords:
-            g = new.get(ix)
-            if g is None:
-                c = old_cells.get(ix)
-                g = c.region if c is not None else None
+            g = _region_at(ix, new, old_cells)
             coords[ix] = np.zeros((0, 2)) if g is None else shapely.get_coordinates(g)
         return coords[ix]
 
     ks, boxes = [], []
     for k, (i, j) in enumerate(idxs):
-        if need is not None and (i, j) not in need:
+        if (i, j) not in need:
             continue
         own = vertices((i, j))
         if len(own) == 0:
@@ -988,11 +996,7 @@ def _typed_cells(
     grown: dict[CellIndex, shapely.Geometry] = {}  # neighbours' regions grown by SECTOR_TOL_M
 
     def across(key: CellIndex) -> shapely.Geometry | None:
-        g = new_regions.get(key)
-        if g is None:
-            c = old_cells.get(key)
-            g = c.region if c is not None else None
-        return g
+        return _region_at(key, new_regions, old_cells)
 
     def sectors(a, b, mid, e_owner, types):
         ij = cell_ij[e_owner]

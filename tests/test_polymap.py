@@ -15,6 +15,7 @@ from polyswarm.polymap import (
     PRECISION_M,
     SLIVER_M,
     GridPolyMap,
+    MergeOptions,
     Ring,
     TypedPolygon,
     VectorType,
@@ -94,11 +95,13 @@ def test_cells_inside_explored_space_change_nothing_unless_they_see_a_wall():
     big = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.6, 1.6, (F, F, F, F))).map
     # another robot's smaller view, all inside: merged away without a change
     inner = GridPolyMap(2.0).merge(rect(0.5, 0.5, 1.2, 1.2, (O, O, O, O))).map
+    assert big._cells_that_change(list(inner.cells.values()), MergeOptions()) == []
     r = big.merge_cells(list(inner.cells.values()))
     assert not r.changed and r.map is big
     # a view inside whose wall lies on a piece of the map's frontier: not skipped, the
     # frontier under the wall becomes an obstacle
     wall = GridPolyMap(2.0).merge(rect(0.5, 0.2, 1.0, 1.0, (O, F, F, F))).map
+    assert len(big._cells_that_change(list(wall.cells.values()), MergeOptions())) == 1
     r = big.merge_cells(list(wall.cells.values()))
     assert r.changed
     assert total_length(r.map, VectorType.OBSTACLE) >= 0.5
