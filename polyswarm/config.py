@@ -114,6 +114,43 @@ class IcpConfig:
     rotation_search_rad: float = 0.35  # heading pre-alignment by wall directions (0: off)
 
 
+class IcpReference(StrEnum):
+    KEYFRAMES = "keyframes"  # obstacle vectors of the nearby keyframes (polyswarm.submap)
+    MAP = "map"  # obstacle vectors of the merged PolyMap (the thesis' choice)
+
+
+@dataclass(frozen=True)
+class SubmapConfig:
+    """Which keyframes a scan is matched against (polyswarm.submap)."""
+
+    reference: str = "keyframes"  # IcpReference
+    keyframes: int = 20  # at most this many keyframes nearest to the predicted pose...
+    radius_m: float = 10.0  # ...within this distance of it...
+    recent: int = 5  # ...plus always the latest few (the ones tracking is sure of)
+
+
+@dataclass(frozen=True)
+class LoopClosureConfig:
+    """Loop edges and pose-graph optimisation (polyswarm.posegraph)."""
+
+    enabled: bool = True
+    min_age_keyframes: int = 30  # a loop joins keyframes at least this many keyframes apart
+    radius_m: float = 5.0  # old keyframes this close to the tracked pose are matched
+    keyframes: int = 10  # the old submap: at most this many keyframes
+    min_inlier_fraction: float = 0.5  # of the scan's valid points, for a loop to count
+    max_rmse_m: float = 0.05  # point-to-vector RMSE of an accepted loop match
+    max_correction_m: float = 2.0  # a loop match moving the pose more than this is refused
+    search_window_m: float = 2.0  # wide search (polyswarm.loopsearch) when ICP fails...
+    search_every_keyframes: int = 5  # ...at most this often, and not right after a loop
+    optimise_above_m: float = 0.02  # a loop correction (heading at 2 m per rad) optimised
+    tracking_sigma_m: float = 0.05  # std of a sequential edge from a successful ICP
+    tracking_sigma_rad: float = 0.01
+    odometry_sigma_m: float = 0.2  # std of a sequential edge where ICP failed
+    odometry_sigma_rad: float = 0.05
+    loop_sigma_m: float = 0.05
+    loop_sigma_rad: float = 0.01
+
+
 @dataclass(frozen=True)
 class LidarMount:
     """Where the lidar sits on the robot (robot frame), and whether it is upside down."""
@@ -136,6 +173,8 @@ class SlamConfig:
     obstacle_max_gap_m: float = 0.5  # consecutive points farther apart become a frontier...
     obstacle_gap_beams: float = 4.0  # ...unless within this many beam spacings at their range
     icp: IcpConfig = field(default_factory=IcpConfig)
+    submap: SubmapConfig = field(default_factory=SubmapConfig)
+    loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)
     mount: LidarMount = field(default_factory=LidarMount)
 
@@ -386,5 +425,11 @@ def validate(cfg: Config) -> None:
     for r in cfg.robots:
         if not r.id or not all(ch.isalnum() or ch in "_-" for ch in r.id) or len(r.id) > 32:
             raise ConfigError(f"robots: id {r.id!r} must be 1-32 letters, digits, '_' or '-'")
+    if cfg.slam.submap.reference not in tuple(IcpReference):
+        raise ConfigError(
+            f"slam.submap.reference must be keyframes or map, got {cfg.slam.submap.reference!r}"
+        )
+    if cfg.slam.submap.keyframes < 0 or cfg.slam.submap.recent < 1:
+        raise ConfigError("slam.submap: keyframes must be >= 0 and recent >= 1")
     if cfg.slam.refine.score_c <= 0:
         raise ConfigError("slam.refine.score_c must be positive (it avoids a division by zero)")

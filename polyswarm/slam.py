@@ -8,26 +8,48 @@
 
 Only keyframes (moved ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` since
 the last one) are aligned and merged; other scans get the odometry prediction.
+
+Beyond the thesis: ICP matches against the obstacle vectors of the nearby keyframes
+rather than the merged map (``polyswarm.submap`` says why), and each keyframe is a node
+of a pose graph whose loop edges (a scan matched against an old part of the map) are
+optimised as they are found (``polyswarm.posegraph``). The merged map only grows, so a
+correction moves the robot and the keyframes it matches against, not what it already
+merged; ``rebuild_map()`` merges every keyframe afresh at its optimised pose (offline
+runs do that at the end), and ``trajectory()`` gives every scan's optimised pose.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from polyswarm.config import SlamConfig
+from polyswarm.config import IcpReference, SlamConfig
 from polyswarm.errors import PolyswarmError
 from polyswarm.icp import IcpResult, PointToVectorIcp
 from polyswarm.keyframe import keyframe_polygon
+from polyswarm.loopsearch import correlative_search
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOptions, VectorType
+from polyswarm.posegraph import PoseGraph
 from polyswarm.refine import refine_polygon
 from polyswarm.scan import LaserScan, scan_to_points
 from polyswarm.se2 import compose, relative, wrap
+from polyswarm.submap import KeyframeStore
 
 log = logging.getLogger(__name__)
+
+# a heading change of 1 rad moves the scan points 2 m away (typical indoor ranges) by
+# about 2 m: how loop corrections of heading and position are weighed against each other
+METRES_PER_RADIAN = 2.0
+ODOMETRY_SIGMA_PER_M = 0.1  # std of odometry along a corridor, per metre travelled
+WEAK_SIGMA_M = 100.0  # std of a loop edge along a corridor: no information there
+
+
+def _rotate(v, angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
 
 
 @dataclass(frozen=True)
@@ -38,6 +60,10 @@ class SlamStep:
     icp: IcpResult | None = None
     refined: str = ""  # "refined", "projected" or "raw" on keyframes
     timings_ms: dict[str, float] = field(default_factory=dict)
+    # the pose as seen from a keyframe, so that trajectory() can follow corrections
+    keyframe_index: int = -1
+    offset: np.ndarray | None = None
+    loop_closed: bool = False
 
 
 class KeyframeSelector:
@@ -73,6 +99,11 @@ class PolySlam:
         self.degenerate_keyframes = 0
         self.rejected_keyframes = 0
         self._keyframe_requested = False
+        sub = cfg.submap
+        self.store = KeyframeStore(sub.keyframes, sub.radius_m, sub.recent)
+        self.graph = PoseGraph()
+        self._steps: list[tuple[int, np.ndarray]] = []  # every scan: (keyframe, offset)
+        self._last_loop = self._last_search = -(10**9)  # keyframes of the last loop, search
 
     def resume(self, pmap: GridPolyMap, pose) -> None:
         """Continue on a persisted map from the last known pose (an agent restarted where
@@ -83,6 +114,10 @@ class PolySlam:
             )
         self.map = pmap
         self.pose = np.array(pose, dtype=float)
+        sub = self.cfg.submap  # the keyframes are not persisted: match the map until new ones
+        self.store = KeyframeStore(sub.keyframes, sub.radius_m, sub.recent)
+        self.graph = PoseGraph()
+        self._steps = []
         self._kf_pose = self._kf_odom = None
         self.selector.last = None
         self._keyframe_requested = True
@@ -104,7 +139,9 @@ class PolySlam:
         # 2. keyframe selection
         if not (self.selector.due(odom) or self._keyframe_requested):
             self.pose = pred
-            return SlamStep(pred, False)
+            offset = relative(self._kf_pose, pred)
+            self._steps.append((len(self.graph) - 1, offset))
+            return SlamStep(pred, False, keyframe_index=len(self.graph) - 1, offset=offset)
         t = {"start": time.perf_counter()}
         m = self.cfg.mount
         # 1. scan to points (robot frame; invalid beams become short frontier points)
@@ -115,15 +152,17 @@ class PolySlam:
         # 4. point-to-vector ICP against the obstacle vectors near the robot
         res = None
         pose = pred
-        if self.map.cells and points.valid.sum() > 0:
-            s, e, _ = self.map.vectors(
-                [VectorType.OBSTACLE],
-                self.map.cells_within(pred[0], pred[1], self.cfg.icp.map_radius_m),
-            )
-            res = self.icp.align(points.xy[points.valid], pred, s, e, points.origin)
+        valid = points.xy[points.valid]
+        if len(valid) and (self.store or self.map.cells):
+            s, e = self._reference(pred)
+            res = self.icp.align(valid, pred, s, e, points.origin)
             pose = res.pose if res.inliers > 0 else pred
             self.degenerate_keyframes += res.degenerate_axis is not None
         t["icp"] = time.perf_counter()
+        # 4b. pose graph: this keyframe's node, its tracking edge, and a loop edge when
+        # the scan also matches an old part of the map
+        pose, loop = self._add_to_graph(pose, res, valid, points.origin)
+        t["loop"] = time.perf_counter()
         # 5. keyframe polygon, closed through the sensor centre
         kf = keyframe_polygon(
             points, pose, self.cfg.obstacle_max_gap_m, self.cfg.obstacle_gap_beams
@@ -140,16 +179,136 @@ class PolySlam:
             self.rejected_keyframes += 1
             log.warning("keyframe %d not merged: %s", self.keyframes, e)
         t["merge"] = time.perf_counter()
+        self.store.add(pose, kf)
+        self._steps.append((len(self.graph) - 1, np.zeros(3)))
         delta = self.map.delta_since(base) if self.map.version != base else None
         self.pose = np.array([pose[0], pose[1], float(wrap(pose[2]))])
         self._kf_pose, self._kf_odom = self.pose.copy(), odom
         self.selector.mark(odom)
         self._keyframe_requested = False
         self.keyframes += 1
-        names = ["points", "icp", "polygon", "refine", "merge"]
+        names = ["points", "icp", "loop", "polygon", "refine", "merge"]
         prev, ms = t["start"], {}
         for name in names:
             ms[name] = (t[name] - prev) * 1e3
             prev = t[name]
         ms["total"] = (t["merge"] - t["start"]) * 1e3
-        return SlamStep(self.pose.copy(), True, delta, res, how, ms)
+        return SlamStep(
+            self.pose.copy(), True, delta, res, how, ms, len(self.graph) - 1, np.zeros(3), loop
+        )
+
+    # -- stage 4's reference and the pose graph ------------------------------------------
+
+    def _reference(self, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.store and self.cfg.submap.reference == IcpReference.KEYFRAMES:
+            return self.store.reference(pred)
+        s, e, _ = self.map.vectors(
+            [VectorType.OBSTACLE],
+            self.map.cells_within(pred[0], pred[1], self.cfg.icp.map_radius_m),
+        )
+        return s, e
+
+    def _add_to_graph(self, pose, res: IcpResult | None, valid, origin) -> tuple[np.ndarray, bool]:
+        lc = self.cfg.loop_closure
+        node = self.graph.add_node(pose)
+        if node == 0:
+            return pose, False
+        prev = self.graph.poses[node - 1]
+        z = relative(prev, pose)
+        tracked = res is not None and res.inliers > 0
+        weak = None  # a corridor: along it the edge is only as good as the odometry
+        if tracked and res.degenerate_axis is not None:
+            weak = _rotate(res.degenerate_axis, -prev[2])
+        self.graph.add_edge(
+            node - 1,
+            node,
+            z,
+            lc.tracking_sigma_m if tracked else lc.odometry_sigma_m,
+            lc.tracking_sigma_rad if tracked else lc.odometry_sigma_rad,
+            weak_axis=weak,
+            weak_sigma_m=lc.odometry_sigma_m + ODOMETRY_SIGMA_PER_M * float(np.hypot(*z[:2])),
+        )
+        if not lc.enabled or len(valid) == 0:
+            return pose, False
+        old = self.store.nearest(pose, exclude_after=node - lc.min_age_keyframes)
+        if len(old) == 0:
+            return pose, False
+        # the old submap: keyframes near the pose, all older than min_age_keyframes
+        d = np.hypot(*(np.array([self.store.keyframes[i].pose[:2] for i in old]) - pose[:2]).T)
+        old = old[d < lc.radius_m][: lc.keyframes]
+        if len(old) == 0:
+            return pose, False
+        s, e = self.store.vectors(old)
+        m = self.icp.align(valid, pose, s, e, origin)
+        ok = self._loop_accepted(m, pose, len(valid))
+        waited = min(node - self._last_loop, node - self._last_search)
+        if not ok and lc.search_window_m > 0 and waited >= lc.search_every_keyframes:
+            # tracking may have drifted beyond ICP's reach: search a wide window first
+            self._last_search = node
+            start, _, ambiguous = correlative_search(valid, pose, s, e, lc.search_window_m)
+            if not ambiguous:
+                m = self.icp.align(valid, start, s, e, origin)
+                ok = self._loop_accepted(m, pose, len(valid))
+        if not ok:
+            return pose, False
+        self._last_loop = node
+        shift = float(np.hypot(*(m.pose[:2] - pose[:2])))
+        anchor = int(old[0])
+        anchor_pose = self.store.keyframes[anchor].pose
+        self.graph.add_edge(
+            anchor,
+            node,
+            relative(anchor_pose, m.pose),
+            lc.loop_sigma_m,
+            lc.loop_sigma_rad,
+            loop=True,
+            # in a corridor the loop says nothing along it
+            weak_axis=None
+            if m.degenerate_axis is None
+            else _rotate(m.degenerate_axis, -anchor_pose[2]),
+            weak_sigma_m=WEAK_SIGMA_M,
+        )
+        if m.degenerate_axis is not None:  # keep the tracked position along the corridor
+            along = m.degenerate_axis @ (m.pose[:2] - pose[:2])
+            m = replace(m, pose=np.r_[m.pose[:2] - along * m.degenerate_axis, m.pose[2]])
+            shift = float(np.hypot(*(m.pose[:2] - pose[:2])))
+        turn = abs(float(wrap(m.pose[2] - pose[2])))
+        if shift + turn * METRES_PER_RADIAN < lc.optimise_above_m:
+            return pose, True  # the loop agrees with tracking: nothing to correct yet
+        poses = self.graph.optimise()
+        self.store.set_poses(poses[:-1])
+        log.debug("loop %d -> %d closed: moved %.3f m, %.2f deg", anchor, node, shift, turn)
+        return poses[-1], True
+
+    def _loop_accepted(self, m: IcpResult, pose, n_points: int) -> bool:
+        lc = self.cfg.loop_closure
+        return bool(
+            m.converged
+            and m.inliers >= lc.min_inlier_fraction * n_points
+            and m.rmse_m <= lc.max_rmse_m
+            and np.hypot(*(m.pose[:2] - pose[:2])) <= lc.max_correction_m
+        )
+
+    @property
+    def loops_closed(self) -> int:
+        return self.graph.loop_edges
+
+    def keyframe_poses(self) -> np.ndarray:
+        """Optimised poses of the keyframes so far (map frame)."""
+        return self.graph.poses
+
+    def trajectory(self) -> np.ndarray:
+        """Every processed scan's pose with all pose-graph corrections applied."""
+        kf = self.graph.poses
+        return np.array([compose(kf[i], off) for i, off in self._steps]).reshape(-1, 3)
+
+    def rebuild_map(self) -> GridPolyMap:
+        """A new map of every keyframe merged at its optimised pose."""
+        pmap = GridPolyMap(self.map.cell_size)
+        for k, kf in enumerate(self.store.keyframes):
+            try:
+                pmap = pmap.merge(kf.polygon_in_map(), self.merge_options).map
+            except PolyswarmError as e:
+                self.rejected_keyframes += 1
+                log.warning("keyframe %d not merged into the rebuilt map: %s", k, e)
+        return pmap

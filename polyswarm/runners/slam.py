@@ -32,7 +32,7 @@ Progress = Callable[[float, float], None]  # (done, total)
 class SlamRun:
     name: str
     stamps: np.ndarray
-    estimate: np.ndarray
+    estimate: np.ndarray  # every scan's pose after all pose-graph corrections
     reference: np.ndarray  # ground truth (simulation) or the log's corrected poses
     odometry: np.ndarray  # the noisy odometry the SLAM consumed, in the map frame
     slam: PolySlam
@@ -42,10 +42,20 @@ class SlamRun:
     simulated: bool
     info: dict = field(default_factory=dict)
     world: object | None = None  # sim.World for simulated runs
+    online: np.ndarray | None = None  # every scan's pose as estimated when it came in
+    final_map: GridPolyMap | None = None  # keyframes merged again at optimised poses
 
     @property
     def map(self) -> GridPolyMap:
-        return self.slam.map
+        return self.final_map if self.final_map is not None else self.slam.map
+
+
+def finish(slam: PolySlam) -> tuple[np.ndarray, GridPolyMap | None, float]:
+    """The optimised trajectory and, when loops were closed, the map merged again at the
+    optimised keyframe poses; with the seconds this took (part of the processing time)."""
+    t0 = time.perf_counter()
+    final_map = slam.rebuild_map() if slam.loops_closed else None
+    return slam.trajectory(), final_map, time.perf_counter() - t0
 
 
 def run_log(
@@ -71,10 +81,12 @@ def run_log(
         if progress:
             progress(k + 1, len(log.scans))
     stamps = np.array([s.stamp for s in log.scans])
+    final, final_map, rebuild_s = finish(slam)
+    spent += rebuild_s
     return SlamRun(
         Path(path).name.split(".")[0],
         stamps,
-        np.array(est),
+        final,
         ref,
         odom,
         slam,
@@ -92,6 +104,8 @@ def run_log(
             "seed": seed,
             "reference": "the log's corrected poses (gmapping), good to a few centimetres",
         },
+        online=np.array(est),
+        final_map=final_map,
     )
 
 
@@ -142,10 +156,12 @@ def run_world(
                 progress(min(follower.progress, total), total)
         collisions = sim.robots[0].wall_collisions
         sim_s = sim.time
+    final, final_map, rebuild_s = finish(slam)
+    spent += rebuild_s
     return SlamRun(
         world.name,
         np.array(stamps),
-        np.array(est),
+        final,
         np.array(gt),
         np.array(odo),
         slam,
@@ -163,6 +179,8 @@ def run_world(
             "odometry_noise": config_to_dict(cfg.sim.odometry_noise),
         },
         world,
+        online=np.array(est),
+        final_map=final_map,
     )
 
 
@@ -174,6 +192,10 @@ def metrics(run: SlamRun) -> dict:
     kf = np.array(run.keyframe_ms) if run.keyframe_ms else np.array([math.nan])
     out = {
         "ate_rmse_m": ev.ate_rmse(est, ref),
+        # the poses as they were estimated scan by scan, before later loop corrections
+        "ate_rmse_online_m": ev.ate_rmse(run.online, ref) if run.online is not None else None,
+        "loops_closed": run.slam.loops_closed,
+        "map_rebuilt_at_optimised_poses": run.final_map is not None,
         "odometry_ate_rmse_m": ev.ate_rmse(run.odometry, ref),
         "rpe_1m_trans_mean_m": r1["trans_mean_m"],
         "rpe_1m_trans_std_m": r1["trans_std_m"],
