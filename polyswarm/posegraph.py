@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
-from scipy.optimize import least_squares
+import scipy.sparse.linalg
 
 from polyswarm.errors import PolyswarmError
 from polyswarm.se2 import relative_many, wrap
@@ -92,57 +92,92 @@ class PoseGraph:
     def loop_edges(self) -> int:
         return sum(e.loop for e in self.edges)
 
-    def residuals(self, poses: np.ndarray) -> np.ndarray:
-        """Weighted errors of all edges, 3 per edge (x, y, theta)."""
+    def _arrays(self) -> tuple[np.ndarray, ...]:
         i = np.array([e.i for e in self.edges])
         j = np.array([e.j for e in self.edges])
-        z = np.array([e.z for e in self.edges])
-        w = np.array([e.sqrt_info for e in self.edges])
+        return (
+            i,
+            j,
+            np.array([e.z for e in self.edges]),
+            np.array([e.sqrt_info for e in self.edges]),
+        )
+
+    def residuals(self, poses: np.ndarray, arrays=None) -> np.ndarray:
+        """Weighted errors of all edges, 3 per edge (x, y, theta)."""
+        i, j, z, w = self._arrays() if arrays is None else arrays
         err = relative_many(poses[i], poses[j]) - z
         err[:, 2] = wrap(err[:, 2])
         return np.einsum("kab,kb->ka", w, err).ravel()
 
-    def optimise(self, max_evaluations: int = 50) -> np.ndarray:
-        """Optimised poses (node 0 fixed); the graph keeps them as its new estimate."""
-        poses0 = self.poses
-        n = len(poses0)
+    def optimise(self, max_iterations: int = 30) -> np.ndarray:
+        """Optimised poses (node 0 fixed); the graph keeps them as its new estimate.
+
+        Sparse Gauss-Newton with the edges' analytic Jacobians: plain least squares
+        first (a true loop edge with a large error must pull), then iteratively
+        reweighted with the Huber loss (edges beyond ``HUBER_SCALE`` sigmas count
+        linearly, so one wrong loop edge does not bend the trajectory)."""
+        poses = self.poses
+        n = len(poses)
         if n < 2 or not self.edges:
-            return poses0
-        free = poses0[1:].ravel()
-
-        def fun(x: np.ndarray) -> np.ndarray:
-            return self.residuals(np.vstack([poses0[:1], x.reshape(-1, 3)]))
-
-        # each edge's 3 residuals depend on the 3 coordinates of its two nodes
-        rows, cols = [], []
-        for k, e in enumerate(self.edges):
-            for node in (e.i, e.j):
-                if node == 0:
-                    continue
-                for r in range(3):
-                    rows += [3 * k + r] * 3
-                    cols += [3 * (node - 1) + c for c in range(3)]
-        sparsity = scipy.sparse.coo_matrix(
-            (np.ones(len(rows)), (rows, cols)), shape=(3 * len(self.edges), 3 * (n - 1))
-        )
-        res = least_squares(
-            fun,
-            free,
-            jac_sparsity=sparsity,
-            loss="huber",
-            f_scale=HUBER_SCALE,
-            max_nfev=max_evaluations,
-            method="trf",
-        )
-        out = np.vstack([poses0[:1], res.x.reshape(-1, 3)])
-        out[:, 2] = wrap(out[:, 2])
+            return poses
+        i, j, z, w = self._arrays()
+        m = len(self.edges)
+        cost0 = 0.5 * float(np.sum(self.residuals(poses, (i, j, z, w)) ** 2))
+        for it in range(max_iterations):
+            robust = it >= max_iterations // 3
+            r, Ji, Jj = _linearise(poses, i, j, z)
+            wr = np.einsum("kab,kb->ka", w, r)
+            Wi, Wj = np.einsum("kab,kbc->kac", w, Ji), np.einsum("kab,kbc->kac", w, Jj)
+            if robust:  # Huber weights per edge, from its weighted error's norm
+                norm = np.linalg.norm(wr, axis=1)
+                h = np.sqrt(np.minimum(1.0, HUBER_SCALE / np.maximum(norm, 1e-12)))
+                wr, Wi, Wj = wr * h[:, None], Wi * h[:, None, None], Wj * h[:, None, None]
+            rows = np.repeat(np.arange(3 * m).reshape(m, 3, 1), 3, axis=2)
+            J = scipy.sparse.csr_matrix(
+                (
+                    np.concatenate([Wi.ravel(), Wj.ravel()]),
+                    (
+                        np.concatenate([rows.ravel(), rows.ravel()]),
+                        np.concatenate([_cols(i), _cols(j)]),
+                    ),
+                ),
+                shape=(3 * m, 3 * n),
+            )[:, 3:]  # node 0 is fixed
+            H = (J.T @ J).tocsc() + scipy.sparse.identity(3 * (n - 1)) * 1e-9
+            step = scipy.sparse.linalg.spsolve(H, -(J.T @ wr.ravel()))
+            poses[1:] += step.reshape(-1, 3)
+            poses[:, 2] = wrap(poses[:, 2])
+            if np.abs(step).max() < 1e-6 and robust:
+                break
         log.debug(
             "pose graph: %d nodes, %d edges (%d loops), cost %.3g -> %.3g",
             n,
-            len(self.edges),
+            m,
             self.loop_edges,
-            0.5 * np.sum(fun(free) ** 2),
-            res.cost,
+            cost0,
+            0.5 * float(np.sum(self.residuals(poses, (i, j, z, w)) ** 2)),
         )
-        self._poses = [p for p in out]
-        return out
+        self._poses = [p for p in poses]
+        return poses
+
+
+def _cols(nodes: np.ndarray) -> np.ndarray:
+    """Column indices of a (3 x 3) block per edge for the given nodes."""
+    return np.broadcast_to((3 * nodes)[:, None, None] + np.arange(3), (len(nodes), 3, 3)).ravel()
+
+
+def _linearise(poses, i, j, z):
+    """Edge errors and their Jacobians with respect to the poses of i and j."""
+    a, b = poses[i], poses[j]
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    r = np.stack([c * dx + s * dy, -s * dx + c * dy, wrap(b[:, 2] - a[:, 2])], axis=1) - z
+    r[:, 2] = wrap(r[:, 2])
+    m = len(i)
+    Ji, Jj = np.zeros((m, 3, 3)), np.zeros((m, 3, 3))
+    Jj[:, 0, 0], Jj[:, 0, 1], Jj[:, 1, 0], Jj[:, 1, 1], Jj[:, 2, 2] = c, s, -s, c, 1.0
+    Ji[:, :2, :2] = -Jj[:, :2, :2]
+    Ji[:, 0, 2] = -s * dx + c * dy
+    Ji[:, 1, 2] = -c * dx - s * dy
+    Ji[:, 2, 2] = -1.0
+    return r, Ji, Jj
