@@ -101,6 +101,8 @@ def run(progress: Callable[[str], None] | None = None, worlds=WORLDS) -> dict:
             "ate_rmse_m": m["ate_rmse_m"],
             "odometry_ate_rmse_m": m["odometry_ate_rmse_m"],
             "improvement": m["odometry_ate_rmse_m"] / m["ate_rmse_m"],
+            "ate_rmse_online_m": m["ate_rmse_online_m"],  # before later loop corrections
+            "loops_closed": m["loops_closed"],
             "rpe_1m_trans_mean_m": m["rpe_1m_trans_mean_m"],
             "max_trans_error_m": m["max_trans_error_m"],
             "distance_travelled_m": m["distance_travelled_m"],
