@@ -85,8 +85,14 @@ class KeyframeSelector:
 
 class PolySlam:
     def __init__(
-        self, cfg: SlamConfig, cell_size_m: float = 2.0, initial_pose=(0.0, 0.0, 0.0)
+        self,
+        cfg: SlamConfig,
+        cell_size_m: float = 2.0,
+        initial_pose=(0.0, 0.0, 0.0),
+        keep_trajectory: bool = False,
     ) -> None:
+        """``keep_trajectory``: remember every scan for ``trajectory()`` (offline runs; a
+        long-running agent leaves it off so its memory does not grow with every scan)."""
         self.cfg = cfg
         self.map = GridPolyMap(cell_size_m)
         self.pose = np.array(initial_pose, dtype=float)
@@ -102,6 +108,7 @@ class PolySlam:
         sub = cfg.submap
         self.store = KeyframeStore(sub.keyframes, sub.radius_m, sub.recent)
         self.graph = PoseGraph()
+        self.keep_trajectory = keep_trajectory
         self._steps: list[tuple[int, np.ndarray]] = []  # every scan: (keyframe, offset)
         self._last_loop = self._last_search = -(10**9)  # keyframes of the last loop, search
 
@@ -140,7 +147,8 @@ class PolySlam:
         if not (self.selector.due(odom) or self._keyframe_requested):
             self.pose = pred
             offset = relative(self._kf_pose, pred)
-            self._steps.append((len(self.graph) - 1, offset))
+            if self.keep_trajectory:
+                self._steps.append((len(self.graph) - 1, offset))
             return SlamStep(pred, False, keyframe_index=len(self.graph) - 1, offset=offset)
         t = {"start": time.perf_counter()}
         m = self.cfg.mount
@@ -180,7 +188,8 @@ class PolySlam:
             log.warning("keyframe %d not merged: %s", self.keyframes, e)
         t["merge"] = time.perf_counter()
         self.store.add(pose, kf)
-        self._steps.append((len(self.graph) - 1, np.zeros(3)))
+        if self.keep_trajectory:
+            self._steps.append((len(self.graph) - 1, np.zeros(3)))
         delta = self.map.delta_since(base) if self.map.version != base else None
         self.pose = np.array([pose[0], pose[1], float(wrap(pose[2]))])
         self._kf_pose, self._kf_odom = self.pose.copy(), odom
@@ -299,6 +308,8 @@ class PolySlam:
 
     def trajectory(self) -> np.ndarray:
         """Every processed scan's pose with all pose-graph corrections applied."""
+        if not self.keep_trajectory:
+            raise PolyswarmError("trajectory() needs PolySlam(..., keep_trajectory=True)")
         kf = self.graph.poses
         return np.array([compose(kf[i], off) for i, off in self._steps]).reshape(-1, 3)
 

@@ -124,7 +124,7 @@ def test_slam_trajectory_follows_loop_corrections():
         np.array([1.0 + 4.0 * (0.5 - 0.5 * math.cos(t)), 2.0 - 1.0 * math.sin(t), 0.0])
         for t in np.linspace(0, 4 * math.pi, 160)
     ]
-    slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=path[0])
+    slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=path[0], keep_trajectory=True)
     odom = path[0].copy()
     for k, p in enumerate(path):
         if k:

@@ -68,7 +68,7 @@ def run_log(
     log = read_carmen(path)
     ref = log.reference
     odom = noisy_odometry(ref, noise, seed)
-    slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=ref[0])
+    slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=ref[0], keep_trajectory=True)
     est, kf_ms = [], []
     spent = 0.0
     for k, s in enumerate(log.scans):
@@ -138,7 +138,7 @@ def run_world(
     spent = 0.0
     with Simulation(world, cfg.sim, 1, start_poses=[start]) as sim:
         follower = PurePursuit(route, speed=speed_mps)
-        slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=start)
+        slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=start, keep_trajectory=True)
         limit_s = 3.0 * total / speed_mps + 120.0  # a stuck robot must not run forever
         while not follower.done and sim.time < limit_s:
             for e in sim.step():
