@@ -171,7 +171,7 @@ def _linearise(poses, i, j, z):
     a, b = poses[i], poses[j]
     c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
     dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
-    r = np.stack([c * dx + s * dy, -s * dx + c * dy, wrap(b[:, 2] - a[:, 2])], axis=1) - z
+    r = relative_many(a, b) - z
     r[:, 2] = wrap(r[:, 2])
     m = len(i)
     Ji, Jj = np.zeros((m, 3, 3)), np.zeros((m, 3, 3))
