@@ -367,7 +367,9 @@ class Simulation:
             z = np.full(len(dx), lid.height_m)
             frm.append(np.column_stack([x + r0 * dx, y + r0 * dy, z]))
             to.append(np.column_stack([x + lid.range_max_m * dx, y + lid.range_max_m * dy, z]))
-        res = self._client.rayTestBatch(np.vstack(frm), np.vstack(to))
+        res = self._client.rayTestBatch(
+            np.vstack(frm), np.vstack(to), numThreads=self.cfg.raycast_threads
+        )
         frac = np.fromiter((h[2] for h in res), dtype=float, count=len(res))
         hit = np.fromiter((h[0] >= 0 for h in res), dtype=bool, count=len(res))
         out = []

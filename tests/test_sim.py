@@ -109,8 +109,8 @@ def test_noise_free_odometry_matches_the_motion():
     assert ev.odom[2] == pytest.approx(ev.true_pose[2] - t0, abs=1e-9)
 
 
-def _run(seed: int):
-    with Simulation(load_world("office"), cfg(seed=seed), 3) as sim:
+def _run(seed: int, threads: int = 0):
+    with Simulation(load_world("office"), cfg(seed=seed, raycast_threads=threads), 3) as sim:
         for k in range(3):
             sim.set_cmd(k, 0.4, 0.2 * (k - 1))
         ev = list(sim.run(4.0))
@@ -121,6 +121,12 @@ def test_a_seed_reproduces_a_run_bit_for_bit():
     a, b, c = _run(5), _run(5), _run(6)
     assert np.array_equal(a[0], b[0], equal_nan=True) and np.array_equal(a[1], b[1])
     assert not np.array_equal(a[0], c[0], equal_nan=True)
+
+
+def test_ray_casting_on_several_threads_gives_the_same_scans_as_on_one():
+    many, one = _run(5, threads=0), _run(5, threads=1)
+    assert np.array_equal(many[0], one[0], equal_nan=True)
+    assert np.isfinite(many[0]).sum() > 1000  # the rays hit walls, not only free space
 
 
 @pytest.mark.parametrize("name", PROCEDURAL)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import resource
+import dataclasses
 import time
 
 import numpy as np
@@ -60,6 +61,9 @@ def run(world_name: str = "data:maze") -> dict:
     world = load_world(world_name)
     sps = {str(n): scans_per_second(world, cfg, n) for n in (1, 3, 10)}
     rtf = real_time_factors(world, cfg, 3)
+    # the same with pybullet's ray casting on the caller's thread only, for comparison
+    one = dataclasses.replace(cfg.sim, raycast_threads=1)
+    rtf1 = real_time_factors(world, dataclasses.replace(cfg, sim=one), 3)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
     return {
         "world": world.name,
@@ -69,5 +73,7 @@ def run(world_name: str = "data:maze") -> dict:
         "real_time_factor_3_robots": rtf["real_time_factor"],
         "raycast_only_real_time_factor_3_robots": rtf["raycast_only_real_time_factor"],
         "non_raycast_fraction_3_robots": rtf["non_raycast_fraction"],
+        "raycast_threads": cfg.sim.raycast_threads,
+        "real_time_factor_3_robots_one_raycast_thread": rtf1["real_time_factor"],
         "peak_memory_mb": peak,
     }

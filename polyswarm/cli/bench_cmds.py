@@ -108,6 +108,10 @@ def bench_sim(
         ("real-time factor, 3 robots", f"{res['real_time_factor_3_robots']:.1f}"),
         ("ray casting only bound", f"{res['raycast_only_real_time_factor_3_robots']:.1f}"),
         ("share of step not ray casting", f"{100 * res['non_raycast_fraction_3_robots']:.0f} %"),
+        (
+            "real-time factor, ray casting on one thread",
+            f"{res['real_time_factor_3_robots_one_raycast_thread']:.1f}",
+        ),
         ("peak memory", f"{res['peak_memory_mb']:.0f} MB"),
     ]
     _emit(res, as_json, f"simulator on {res['world']} ({res['beams']} beams)", rows)
