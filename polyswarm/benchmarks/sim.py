@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import resource
 import dataclasses
+import resource
 import time
 
 import numpy as np
