@@ -66,14 +66,20 @@ class VectorIndex:
         ends = np.asarray(ends, dtype=float).reshape(-1, 2)
         if len(starts) == 0:
             return cls(starts, ends, None, np.zeros(0, dtype=np.int64))
-        d = ends - starts
-        L = np.hypot(d[:, 0], d[:, 1])
-        n = np.maximum(1, np.ceil(L / spacing).astype(np.int64)) + 1
-        owner = np.repeat(np.arange(len(starts)), n)
-        first = np.cumsum(n) - n
-        t = (np.arange(len(owner)) - first[owner]) / (n[owner] - 1)
-        samples = starts[owner] + t[:, None] * d[owner]
+        samples, owner = sample_vectors(starts, ends, spacing)
         return cls(starts, ends, cKDTree(samples), owner)
+
+
+def sample_vectors(starts: np.ndarray, ends: np.ndarray, spacing: float):
+    """Points along every vector, both ends included, at most ``spacing`` apart; with the
+    index of the vector each point lies on."""
+    d = ends - starts
+    L = np.hypot(d[:, 0], d[:, 1])
+    n = np.maximum(1, np.ceil(L / spacing).astype(np.int64)) + 1
+    owner = np.repeat(np.arange(len(starts)), n)
+    first = np.cumsum(n) - n
+    t = (np.arange(len(owner)) - first[owner]) / (n[owner] - 1)
+    return starts[owner] + t[:, None] * d[owner], owner
 
 
 def scan_tangents(points: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ import math
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from polyswarm.icp import sample_vectors
 from polyswarm.se2 import transform_points
 
 RESOLUTION_M = 0.05  # distance-field cell
@@ -29,13 +30,7 @@ AMBIGUITY_RATIO = 0.95  # ...scoring this share of the best makes the match ambi
 
 def _distance_field(starts, ends, lo, hi) -> np.ndarray:
     shape = np.ceil((hi - lo) / RESOLUTION_M).astype(int) + 1
-    d = ends - starts
-    L = np.hypot(d[:, 0], d[:, 1])
-    n = np.maximum(1, np.ceil(L / (0.5 * RESOLUTION_M)).astype(int)) + 1
-    owner = np.repeat(np.arange(len(starts)), n)
-    first = np.cumsum(n) - n
-    t = (np.arange(len(owner)) - first[owner]) / (n[owner] - 1)
-    pts = starts[owner] + t[:, None] * d[owner]
+    pts, _ = sample_vectors(starts, ends, 0.5 * RESOLUTION_M)
     ij = np.floor((pts - lo) / RESOLUTION_M).astype(int)
     ok = (ij >= 0).all(axis=1) & (ij < shape).all(axis=1)
     free = np.ones(shape, dtype=bool)

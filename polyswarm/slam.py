@@ -239,12 +239,10 @@ class PolySlam:
         )
         if not lc.enabled or len(valid) == 0:
             return pose, False
-        old = self.store.nearest(pose, exclude_after=node - lc.min_age_keyframes)
-        if len(old) == 0:
-            return pose, False
         # the old submap: keyframes near the pose, all older than min_age_keyframes
-        d = np.hypot(*(np.array([self.store.keyframes[i].pose[:2] for i in old]) - pose[:2]).T)
-        old = old[d < lc.radius_m][: lc.keyframes]
+        old = self.store.nearest(
+            pose, node - lc.min_age_keyframes, radius_m=lc.radius_m, limit=lc.keyframes
+        )
         if len(old) == 0:
             return pose, False
         s, e = self.store.vectors(old)

@@ -81,15 +81,24 @@ class KeyframeStore:
             kf.pose = p.copy()
         self._xy = poses[:, :2].copy()
 
-    def nearest(self, pose, exclude_after: int | None = None) -> np.ndarray:
-        """Indices of the keyframes within ``radius_m`` of ``pose``, nearest first, at most
-        ``max_keyframes``; ``exclude_after`` keeps only keyframes older than that index."""
+    def nearest(
+        self,
+        pose,
+        exclude_after: int | None = None,
+        radius_m: float | None = None,
+        limit: int | None = None,
+    ) -> np.ndarray:
+        """Indices of the keyframes within ``radius_m`` (default: the store's) of ``pose``,
+        nearest first, at most ``limit`` (default ``max_keyframes``); ``exclude_after``
+        keeps only keyframes older than that index."""
         n = len(self.keyframes) if exclude_after is None else max(0, exclude_after)
         if n == 0:
             return np.zeros(0, dtype=np.int64)
+        radius_m = self.radius_m if radius_m is None else radius_m
+        limit = self.max_keyframes if limit is None else limit
         d = np.hypot(self._xy[:n, 0] - pose[0], self._xy[:n, 1] - pose[1])
-        near = np.flatnonzero(d < self.radius_m)
-        return near[np.argsort(d[near], kind="stable")][: self.max_keyframes]
+        near = np.flatnonzero(d < radius_m)
+        return near[np.argsort(d[near], kind="stable")][:limit]
 
     def vectors(self, which) -> tuple[np.ndarray, np.ndarray]:
         """World-frame obstacle vectors of the keyframes ``which``."""
