@@ -531,7 +531,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
     robots = {r.id: tuple(r.start) for r in cfg.robots}
     coord = Coordinator(cfg, robots)
     state_dir = cfg.persist.dir
-    saved_t = -math.inf
+    journal = persist.CoordinatorJournal(state_dir) if state_dir else None
     if state_dir:
         merged, robot_maps = persist.load_coordinator(state_dir)
         coord.restore(merged, robot_maps)
@@ -577,6 +577,9 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                             except MapError as e:
                                 log.info("resync of %s: %s", rid, e)
                                 resync.add(rid)
+                            else:
+                                copy = coord.robot(rid).map
+                                _journal(journal, "robot_delta", rid, item.payload, copy)
                     except DecodeError as e:
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
@@ -589,18 +592,18 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                     if got is None:
                         continue
                     try:
+                        before = coord.robot(rid).map
                         coord.on_robot_map(rid, decode_map(got[0]))
                         resync.discard(rid)
+                        if coord.robot(rid).map is not before:
+                            _journal(journal, "robot_map", rid, coord.robot(rid).map)
                     except PolyswarmError as e:
                         log.warning("map of %s refused: %s", rid, e)
                 if coord.flush_due():
-                    _publish_delta(bus, keys, coord, coord.flush())
+                    _publish_delta(bus, keys, coord, coord.flush(), journal)
                 if coord.due():
                     out = coord.cycle()
-                    _publish_delta(bus, keys, coord, out.merged_delta)
-                    if state_dir and time.monotonic() - saved_t >= persist.COORDINATOR_PERIOD_S:
-                        saved_t = time.monotonic()
-                        _save(coord, state_dir)
+                    _publish_delta(bus, keys, coord, out.merged_delta, journal)
                     for rid, a in out.assignments.items():
                         coord.bytes_sent += bus.publish(
                             keys.assignment(rid), a, coord.now, reliable=True
@@ -611,29 +614,35 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         )
         finally:
             bus.close()
-            if state_dir:
-                _save(coord, state_dir)
+            if journal is not None:  # what the robots sent is merged before it is written
+                delta = coord.flush()
+                if delta is not None:
+                    _journal(journal, "merged", encode_delta(delta), coord.merged)
     return coord
 
 
-def _save(coord: Coordinator, state_dir: str) -> None:
+def _journal(journal: persist.CoordinatorJournal | None, what: str, *args) -> None:
+    """``journal.what(*args)`` if the coordinator keeps state; a full disk is logged, and
+    must not stop the mission."""
+    if journal is None:
+        return
     try:
-        coord.flush()  # what the robots sent is merged before it is written
-        persist.save_coordinator(
-            state_dir, coord.merged, {r.id: r.map for r in coord.robots.values()}
-        )
-    except OSError as e:  # a full disk must not stop the mission
-        log.error("could not save the coordinator's state in %s: %s", state_dir, e)
+        getattr(journal, what)(*args)
+    except OSError as e:
+        log.error("could not write the coordinator's state: %s", e)
 
 
-def _publish_delta(bus, keys: SwarmKeys, coord: Coordinator, delta: MapDelta | None) -> None:
+def _publish_delta(
+    bus,
+    keys: SwarmKeys,
+    coord: Coordinator,
+    delta: MapDelta | None,
+    journal: persist.CoordinatorJournal | None = None,
+) -> None:
     if delta is None:
         return
+    wire = encode_delta(delta)
+    _journal(journal, "merged", wire, coord.merged)  # on disk before anyone has seen it
     coord.bytes_sent += bus.publish_map(
-        keys.merged_delta,
-        MapKind.DELTA,
-        encode_delta(delta),
-        delta.base_version,
-        delta.version,
-        coord.now,
+        keys.merged_delta, MapKind.DELTA, wire, delta.base_version, delta.version, coord.now
     )

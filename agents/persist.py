@@ -5,8 +5,11 @@ others have seen is always on disk; an append costs the same whatever the map's 
 while rewriting the whole map grows with it) and writes a snapshot of its whole map
 every ``SNAPSHOT_EVERY`` deltas and on shutdown, which empties the journal; loading
 applies the journal to the snapshot.
-The coordinator writes the merged
-map and every robot's map every ``COORDINATOR_PERIOD_S`` and on shutdown. Files are
+The coordinator keeps the merged map and its copy of every robot's map the same way
+(``CoordinatorJournal``): each delta it applies or publishes is appended, encoded as it
+arrived or left, and a map is snapshotted every ``SNAPSHOT_EVERY`` deltas or when a
+robot's full map replaces it (a resync). Nothing large is written at shutdown, so a
+loaded machine still stops within the launcher's grace period. Files are
 written to a temporary name and renamed (atomic on POSIX): a crash mid-write leaves the
 previous state. A state file that does not decode is moved aside (``.corrupt``) and
 logged; the process starts with an empty map rather than not at all.
@@ -28,7 +31,6 @@ from protocols.mapcodec import decode_delta, decode_map, encode_map
 
 log = logging.getLogger(__name__)
 
-COORDINATOR_PERIOD_S = 5.0  # simulated or wall seconds between coordinator state writes
 SNAPSHOT_EVERY = 50  # agent deltas journaled between two snapshots of the whole map
 
 
@@ -81,14 +83,24 @@ def save_agent(state_dir: str | Path, robot_id: str, pmap: GridPolyMap, pose) ->
     journal.unlink(missing_ok=True)
 
 
-def journal_delta(state_dir: str | Path, robot_id: str, delta_bytes: bytes, pose, version) -> None:
-    """Append one encoded delta (length-prefixed) to the journal, flushed to disk."""
-    _, meta_path, journal = agent_paths(state_dir, robot_id)
+def save_pose(state_dir: str | Path, robot_id: str, pose, version: int) -> None:
+    """The last pose only (shutdown: the map is already on disk, snapshot plus journal)."""
+    _write_meta(agent_paths(state_dir, robot_id)[1], robot_id, pose, version)
+
+
+def _append(journal: Path, delta_bytes: bytes) -> None:
+    """Append one encoded delta (length-prefixed) to a journal, flushed to disk."""
     journal.parent.mkdir(parents=True, exist_ok=True)
     with open(journal, "ab") as f:
         f.write(len(delta_bytes).to_bytes(4, "little") + delta_bytes)
         f.flush()
         os.fsync(f.fileno())
+
+
+def journal_delta(state_dir: str | Path, robot_id: str, delta_bytes: bytes, pose, version) -> None:
+    """Append one encoded delta of the agent's map to its journal, and its pose."""
+    _, meta_path, journal = agent_paths(state_dir, robot_id)
+    _append(journal, delta_bytes)
     _write_meta(meta_path, robot_id, pose, version)
 
 
@@ -136,21 +148,52 @@ def coordinator_paths(state_dir: str | Path) -> tuple[Path, Path]:
     return d / "coordinator-merged.polymap", d / "coordinator-robots"
 
 
-def save_coordinator(state_dir: str | Path, merged: GridPolyMap, robot_maps: dict) -> None:
-    merged_path, robots_dir = coordinator_paths(state_dir)
-    save_map(merged_path, merged)
-    for rid, pmap in robot_maps.items():
-        if pmap is not None:
-            save_map(robots_dir / f"{rid}.polymap", pmap)
+class CoordinatorJournal:
+    """The coordinator's state on disk, written as it changes (owned by one coordinator).
+
+    Per map (the merged map, and the coordinator's copy of each robot's map): a snapshot
+    and a journal of the encoded deltas applied since. ``load_coordinator`` reads them
+    back."""
+
+    def __init__(self, state_dir: str | Path) -> None:
+        self.merged_path, self.robots_dir = coordinator_paths(state_dir)
+        self._journaled: dict[Path, int] = {}  # snapshot -> deltas in its journal
+
+    def merged(self, delta_bytes: bytes, pmap: GridPolyMap) -> None:
+        """The merged map's delta ``delta_bytes`` was applied, giving ``pmap``."""
+        self._record(self.merged_path, delta_bytes, pmap)
+
+    def robot_delta(self, robot_id: str, delta_bytes: bytes, pmap: GridPolyMap) -> None:
+        """A robot's delta was applied to the coordinator's copy, giving ``pmap``."""
+        self._record(self.robots_dir / f"{robot_id}.polymap", delta_bytes, pmap)
+
+    def robot_map(self, robot_id: str, pmap: GridPolyMap) -> None:
+        """A robot's full map replaced the coordinator's copy (a resync)."""
+        self._record(self.robots_dir / f"{robot_id}.polymap", None, pmap)
+
+    def _record(self, snapshot: Path, delta_bytes: bytes | None, pmap: GridPolyMap) -> None:
+        n = self._journaled.get(snapshot, 0)
+        if delta_bytes is None or n >= SNAPSHOT_EVERY or not snapshot.exists():
+            # snapshot first, then drop the journal: a crash in between leaves old deltas
+            # that replay onto the newer snapshot as no-ops
+            save_map(snapshot, pmap)
+            snapshot.with_suffix(".journal").unlink(missing_ok=True)
+            self._journaled[snapshot] = 0
+        else:
+            _append(snapshot.with_suffix(".journal"), delta_bytes)
+            self._journaled[snapshot] = n + 1
 
 
 def load_coordinator(state_dir: str | Path) -> tuple[GridPolyMap | None, dict]:
+    """The merged map and the robots' maps a coordinator wrote (snapshots plus journals)."""
     merged_path, robots_dir = coordinator_paths(state_dir)
     merged = load_map(merged_path)
+    if merged is not None:
+        merged = _replay_journal(merged_path.with_suffix(".journal"), merged)
     robots = {}
     if robots_dir.is_dir():
         for p in sorted(robots_dir.glob("*.polymap")):
             m = load_map(p)
             if m is not None:
-                robots[p.stem] = m
+                robots[p.stem] = _replay_journal(p.with_suffix(".journal"), m)
     return merged, robots

@@ -581,8 +581,8 @@ def run_agent(
             if attach is not None and detach is not None:
                 detach()
             bus.close()
-            if state_dir:
-                persist.save_agent(state_dir, robot_id, agent.slam.map, agent.pose)
+            if state_dir:  # the map is on disk already (snapshot and journal): the pose
+                persist.save_pose(state_dir, robot_id, agent.pose, agent.slam.map.version)
     return agent
 
 

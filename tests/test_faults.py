@@ -5,14 +5,13 @@ processes) on the small ``rooms`` world with one kind of fault injected."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import sys
 
 import pytest
 import shapely
-
-from protocols.files import read_polymap
 
 
 def launch(tmp_path, *extra: str) -> tuple[dict, object]:
@@ -37,11 +36,14 @@ def assert_nothing_lost(out) -> None:
     """The coordinator's merged map holds everything it received from each robot, and
     each robot still holds everything it sent (deltas in flight at shutdown are in the
     robot's own persisted map)."""
+    from agents import persist
+
     state = out / "state"
-    merged = read_polymap(state / "coordinator-merged.polymap").explored_region()
+    merged, robots = persist.load_coordinator(state)  # snapshots plus journals
+    merged = merged.explored_region()
     for r in ("r1", "r2"):
-        received = read_polymap(state / "coordinator-robots" / f"{r}.polymap").explored_region()
-        own = read_polymap(state / f"{r}.polymap").explored_region()
+        received = robots[r].explored_region()
+        own = persist.load_agent(state, r)[0].explored_region()
         missing = shapely.difference(received, merged).area
         assert missing <= 1e-3 * received.area, f"{missing:.3f} m2 of {r} not in the merge"
         dropped = shapely.difference(received, own).area
@@ -107,3 +109,33 @@ def test_agent_state_is_a_snapshot_plus_a_journal_of_deltas(tmp_path):
     assert pmap.version == b.version  # the torn delta is lost, the others are not
     persist.save_agent(tmp_path, "r1", c, (6, 1, 0))
     assert not journal.exists()
+
+
+def test_coordinator_state_is_journaled_as_it_changes(tmp_path, monkeypatch):
+    """Unit level: every applied delta is on disk at once, so a coordinator killed
+    without a shutdown loses nothing; snapshots bound the journals; a resync snapshots."""
+    from agents import persist
+    from polyswarm.polymap import GridPolyMap
+    from protocols.mapcodec import encode_delta
+    from tests.conftest import F, O, rect
+
+    monkeypatch.setattr(persist, "SNAPSHOT_EVERY", 2)
+    maps = [GridPolyMap(2.0)]
+    for k in range(5):  # a corridor growing to the right, one delta per step
+        maps.append(maps[-1].merge(rect(0.5 + 2 * k, 0.5, 3.0 + 2 * k, 1.5, (O, F, O, F))).map)
+    journal = persist.CoordinatorJournal(tmp_path)
+    robot_journal = tmp_path / "coordinator-robots" / "r1.journal"
+    sizes = []
+    for a, b in itertools.pairwise(maps):
+        wire = encode_delta(b.delta_since(a.version))
+        journal.robot_delta("r1", wire, b)
+        journal.merged(wire, b)
+        sizes.append(robot_journal.stat().st_size if robot_journal.exists() else 0)
+        merged, robots = persist.load_coordinator(tmp_path)  # as if killed right now
+        assert merged.version == b.version and robots["r1"].version == b.version
+        assert robots["r1"].explored_area() == pytest.approx(b.explored_area())
+    # first delta: a snapshot; then journaled; after SNAPSHOT_EVERY deltas a new snapshot
+    assert sizes[0] == 0 and sizes[1] > 0 and sizes[2] > sizes[1] and sizes[3] == 0
+    journal.robot_map("r1", maps[-1])  # a resync replaces the copy: snapshot, no journal
+    assert not robot_journal.exists()
+    assert persist.load_coordinator(tmp_path)[1]["r1"].version == maps[-1].version

@@ -22,8 +22,8 @@ from pathlib import Path
 
 
 def run(robots: int, world: str, duration_s: float, out: Path | None, seed: int = 0) -> dict:
+    from agents import persist
     from polyswarm.runners.launch import LaunchOptions, launch
-    from protocols.files import read_polymap
 
     out = out or Path(tempfile.mkdtemp(prefix="polyswarm-bench-load-"))
     opts = LaunchOptions(
@@ -33,12 +33,12 @@ def run(robots: int, world: str, duration_s: float, out: Path | None, seed: int 
     state = out / "state"
     lost = 0
     per_robot = {}
+    _, received = persist.load_coordinator(state)  # snapshots plus journals, both sides
     for k in range(robots):
         rid = f"r{k + 1}"
-        own = state / f"{rid}.polymap"
-        got = state / "coordinator-robots" / f"{rid}.polymap"
-        sent_v = read_polymap(own).version if own.exists() else 0
-        got_v = read_polymap(got).version if got.exists() else 0
+        own = persist.load_agent(state, rid)
+        sent_v = own[0].version if own is not None else 0
+        got_v = received[rid].version if rid in received else 0
         per_robot[rid] = {"sent_version": sent_v, "received_version": got_v}
         lost += max(0, sent_v - got_v)
     rss = m["coordinator_rss_mb_over_time"]
