@@ -9,7 +9,9 @@ runs for a wall-clock duration (the soak). Measured:
   both sides persist at shutdown (each missing version is a delta neither delivered
   nor recovered by a resync);
 * ``memory_growth_fraction``: the coordinator's resident memory at the end against
-  its value after the first tenth of the run (the map grows, so some growth is data).
+  its value after the first tenth of the run (the map grows, so some growth is data);
+  ``memory_growth_fraction_second_half`` the same from the middle of the run, when a
+  30-minute soak has long finished mapping its world (a leak would still show there).
 
 On this 2-core machine ten agents with PolySLAM slow the lockstep simulation down;
 the figures are those of the coordinator under that load.
@@ -42,10 +44,12 @@ def run(robots: int, world: str, duration_s: float, out: Path | None, seed: int 
         per_robot[rid] = {"sent_version": sent_v, "received_version": got_v}
         lost += max(0, sent_v - got_v)
     rss = m["coordinator_rss_mb_over_time"]
-    growth = None
+    growth = growth_late = None
     if len(rss) >= 3:
         base = rss[max(1, len(rss) // 10)][1]
         growth = (rss[-1][1] - base) / base
+        half = rss[len(rss) // 2][1]  # by then a soak long enough has mapped its world
+        growth_late = (rss[-1][1] - half) / half
     return {
         "robots": robots,
         "world": world,
@@ -54,6 +58,7 @@ def run(robots: int, world: str, duration_s: float, out: Path | None, seed: int 
         "messages_lost": lost,
         "coordinator_cycle_p95_ms": m["coordinator_cycle_p95_ms"],
         "memory_growth_fraction": growth,
+        "memory_growth_fraction_second_half": growth_late,
         "coordinator_rss_mb_first_last": [rss[0][1], rss[-1][1]] if rss else None,
         "final_coverage": m["final_coverage"],
         "crashed_processes": m["crashed_processes"],

@@ -456,7 +456,7 @@ def bench_load(
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return
-    g = res["memory_growth_fraction"]
+    g, g2 = res["memory_growth_fraction"], res["memory_growth_fraction_second_half"]
     _emit(
         res,
         False,
@@ -466,6 +466,7 @@ def bench_load(
             ("messages lost (map versions)", str(res["messages_lost"])),
             ("coordinator cycle p95", f"{res['coordinator_cycle_p95_ms']:.0f} ms"),
             ("coordinator memory growth", "-" if g is None else f"{100 * g:.1f} %"),
+            ("... over the second half", "-" if g2 is None else f"{100 * g2:.1f} %"),
             ("crashed processes", ", ".join(res["crashed_processes"]) or "none"),
         ],
     )
