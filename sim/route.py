@@ -48,6 +48,15 @@ def coverage_route(
     # distance can overstate the true clearance by half a cell diagonal
     clear = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1] * res
     safe = clear - res * 0.71 >= clearance_m
+    # a wall thinner than a cell can fall between cell centres, so that the grid sees
+    # free cells on both sides and routes through it: measure to the true walls too
+    r, c = np.nonzero(safe)
+    starts, ends = world.wall_segments
+    walls = shapely.STRtree(shapely.linestrings(np.stack([starts, ends], axis=1)))
+    centres = shapely.points(ox + (c + 0.5) * res, oy + (r + 0.5) * res)
+    _, d = walls.query_nearest(centres, return_distance=True, all_matches=False)
+    safe[r, c] = d >= clearance_m
+    clear[r, c] = np.minimum(clear[r, c], d)
     rows, cols = safe.shape
     idx = -np.ones(safe.shape, dtype=np.int64)
     cells = np.argwhere(safe)

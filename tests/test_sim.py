@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+import shapely
 
 from polyswarm.config import SimConfig, with_overrides
 from polyswarm.data import WORLDS
@@ -159,3 +160,21 @@ def test_data_worlds_wall_boxes_cover_every_occupied_pixel_and_no_free_one(share
 def test_the_start_must_be_free():
     with pytest.raises(SimulationError):
         Simulation(square_room(), cfg(), 1, start_poses=[(0.05, 2.0, 0.0)])
+
+
+def test_coverage_route_never_crosses_a_wall_thinner_than_its_grid():
+    """A 50 m x 40 m world (planned on the coarse 0.25 m grid) split by a 0.1 m wall
+    with a 2 m door: cell centres fall on both sides of the wall, but the route must go
+    through the door (it once went through such walls, and the robot stuck there)."""
+    from sim.route import COARSE_GRID_M, coverage_route
+
+    lines = [_square(0, 0, 50, 40), [(25.0, 0.0), (25.0, 18.0)], [(25.0, 20.0), (25.0, 40.0)]]
+    walls = _walls_from_lines(lines, 0.1)
+    world = _world_from_walls("split", walls, (5.0, 5.0))
+    assert world.free.area > 1500 and COARSE_GRID_M > 0.1  # the coarse grid is used
+    route = coverage_route(world)
+    assert route[:, 0].max() > 40  # it does cover the far room...
+    line = shapely.LineString(route)
+    assert not line.intersects(walls)  # ...through the door, not the wall
+    through = line.intersection(shapely.box(24.9, 0, 25.1, 40))
+    assert through.bounds[1] > 18.0 and through.bounds[3] < 20.0
