@@ -155,6 +155,9 @@ class Coordinator:
             self._index = None
         for rid, pmap in robot_maps.items():
             self.robot(rid).map = pmap
+            # cells applied but not merged when the old process died are merged now
+            # (cells the merged map already holds are dropped cheaply before the overlay)
+            self._pending.setdefault(rid, set()).update(pmap.cells)
 
     def on_alive(self, rid: str, alive: bool) -> None:
         info = self.robot(rid)

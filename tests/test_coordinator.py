@@ -211,6 +211,16 @@ def test_a_delta_gap_is_refused_and_a_full_map_resyncs():
     assert c.merged.explored_area() == pytest.approx(later.explored_area(), rel=1e-6)
 
 
+def test_a_restored_coordinator_merges_what_it_had_applied_but_not_merged():
+    """Killed between applying a robot's delta and merging it: the restored robot copy
+    is merged at the next flush, so nothing the coordinator had received is lost."""
+    m = corridor_map(open_end=True)
+    c = coordinator(1)
+    c.restore(GridPolyMap(2.0), {"r1": m})  # the merged map on disk lacks the corridor
+    c.flush()
+    assert c.merged.explored_area() == pytest.approx(m.explored_area(), rel=1e-6)
+
+
 def test_cells_of_two_robots_in_the_same_cell_are_united():
     a = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.8, (O, F, O, O))).map
     b = GridPolyMap(2.0).merge(rect(1.0, 0.2, 1.8, 1.8, (O, O, O, F))).map
