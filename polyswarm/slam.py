@@ -60,10 +60,6 @@ class SlamStep:
     icp: IcpResult | None = None
     refined: str = ""  # "refined", "projected" or "raw" on keyframes
     timings_ms: dict[str, float] = field(default_factory=dict)
-    # the pose as seen from a keyframe, so that trajectory() can follow corrections
-    keyframe_index: int = -1
-    offset: np.ndarray | None = None
-    loop_closed: bool = False
 
 
 class KeyframeSelector:
@@ -146,10 +142,9 @@ class PolySlam:
         # 2. keyframe selection
         if not (self.selector.due(odom) or self._keyframe_requested):
             self.pose = pred
-            offset = relative(self._kf_pose, pred)
-            if self.keep_trajectory:
-                self._steps.append((len(self.graph) - 1, offset))
-            return SlamStep(pred, False, keyframe_index=len(self.graph) - 1, offset=offset)
+            if self.keep_trajectory:  # as seen from its keyframe, to follow corrections
+                self._steps.append((len(self.graph) - 1, relative(self._kf_pose, pred)))
+            return SlamStep(pred, False)
         t = {"start": time.perf_counter()}
         m = self.cfg.mount
         # 1. scan to points (robot frame; invalid beams become short frontier points)
@@ -169,7 +164,7 @@ class PolySlam:
         t["icp"] = time.perf_counter()
         # 4b. pose graph: this keyframe's node, its tracking edge, and a loop edge when
         # the scan also matches an old part of the map
-        pose, loop = self._add_to_graph(pose, res, valid, points.origin)
+        pose = self._add_to_graph(pose, res, valid, points.origin)
         t["loop"] = time.perf_counter()
         # 5. keyframe polygon, closed through the sensor centre
         kf = keyframe_polygon(
@@ -202,9 +197,7 @@ class PolySlam:
             ms[name] = (t[name] - prev) * 1e3
             prev = t[name]
         ms["total"] = (t["merge"] - t["start"]) * 1e3
-        return SlamStep(
-            self.pose.copy(), True, delta, res, how, ms, len(self.graph) - 1, np.zeros(3), loop
-        )
+        return SlamStep(self.pose.copy(), True, delta, res, how, ms)
 
     # -- stage 4's reference and the pose graph ------------------------------------------
 
@@ -217,11 +210,12 @@ class PolySlam:
         )
         return s, e
 
-    def _add_to_graph(self, pose, res: IcpResult | None, valid, origin) -> tuple[np.ndarray, bool]:
+    def _add_to_graph(self, pose, res: IcpResult | None, valid, origin) -> np.ndarray:
+        """Add the keyframe to the pose graph; its pose after any loop correction."""
         lc = self.cfg.loop_closure
         node = self.graph.add_node(pose)
         if node == 0:
-            return pose, False
+            return pose
         prev = self.graph.poses[node - 1]
         z = relative(prev, pose)
         tracked = res is not None and res.inliers > 0
@@ -238,13 +232,13 @@ class PolySlam:
             weak_sigma_m=lc.odometry_sigma_m + ODOMETRY_SIGMA_PER_M * float(np.hypot(*z[:2])),
         )
         if not lc.enabled or len(valid) == 0:
-            return pose, False
+            return pose
         # the old submap: keyframes near the pose, all older than min_age_keyframes
         old = self.store.nearest(
             pose, node - lc.min_age_keyframes, radius_m=lc.radius_m, limit=lc.keyframes
         )
         if len(old) == 0:
-            return pose, False
+            return pose
         s, e = self.store.vectors(old)
         m = self.icp.align(valid, pose, s, e, origin)
         ok = self._loop_accepted(m, pose, len(valid))
@@ -257,7 +251,7 @@ class PolySlam:
                 m = self.icp.align(valid, start, s, e, origin)
                 ok = self._loop_accepted(m, pose, len(valid))
         if not ok:
-            return pose, False
+            return pose
         self._last_loop = node
         shift = float(np.hypot(*(m.pose[:2] - pose[:2])))
         anchor = int(old[0])
@@ -281,11 +275,11 @@ class PolySlam:
             shift = float(np.hypot(*(m.pose[:2] - pose[:2])))
         turn = abs(float(wrap(m.pose[2] - pose[2])))
         if shift + turn * METRES_PER_RADIAN < lc.optimise_above_m:
-            return pose, True  # the loop agrees with tracking: nothing to correct yet
+            return pose  # the loop agrees with tracking: nothing to correct yet
         poses = self.graph.optimise()
         self.store.set_poses(poses[:-1])
         log.debug("loop %d -> %d closed: moved %.3f m, %.2f deg", anchor, node, shift, turn)
-        return poses[-1], True
+        return poses[-1]
 
     def _loop_accepted(self, m: IcpResult, pose, n_points: int) -> bool:
         lc = self.cfg.loop_closure
@@ -299,10 +293,6 @@ class PolySlam:
     @property
     def loops_closed(self) -> int:
         return self.graph.loop_edges
-
-    def keyframe_poses(self) -> np.ndarray:
-        """Optimised poses of the keyframes so far (map frame)."""
-        return self.graph.poses
 
     def trajectory(self) -> np.ndarray:
         """Every processed scan's pose with all pose-graph corrections applied."""

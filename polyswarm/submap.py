@@ -57,18 +57,15 @@ class KeyframeStore:
         return len(self.keyframes)
 
     def add(self, pose, polygon: TypedPolygon) -> None:
-        starts, ends = [], []
-        for ring in (polygon.shell, *polygon.holes):
-            ob = ring.types == VectorType.OBSTACLE
-            starts.append(ring.xy[ob])
-            ends.append(np.roll(ring.xy, -1, axis=0)[ob])
+        starts, ends, types = polygon.segments()
+        ob = types == VectorType.OBSTACLE
         pose = np.array(pose, dtype=float)
         to_local = inverse(pose)
         self.keyframes.append(
             StoredKeyframe(
                 pose,
-                transform_points(to_local, np.vstack(starts)),
-                transform_points(to_local, np.vstack(ends)),
+                transform_points(to_local, starts[ob]),
+                transform_points(to_local, ends[ob]),
                 move_polygon(polygon, to_local),
             )
         )
