@@ -32,7 +32,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon, box
 
-from polyswarm.errors import DeltaGapError, InvalidPolygonError, MapError
+from polyswarm.errors import DeltaGapError, GeometryError, InvalidPolygonError, MapError
 
 log = logging.getLogger(__name__)
 
@@ -340,7 +340,10 @@ class GridPolyMap:
         geom = polygon.validate()
         s, e, t = polygon.segments()
         obstacle = t == VectorType.OBSTACLE
-        return self._merge_geometry(geom, s[obstacle], e[obstacle], options or MergeOptions())
+        try:
+            return self._merge_geometry(geom, s[obstacle], e[obstacle], options or MergeOptions())
+        except shapely.errors.GEOSException as err:  # the last net: this map is unchanged
+            raise GeometryError(f"GEOS failed to merge the polygon: {err}") from err
 
     @classmethod
     def from_polygons(
@@ -406,6 +409,12 @@ class GridPolyMap:
         for c in cells:
             if abs(c.size - self.cell_size) > 1e-9:
                 raise MapError(f"cell size {c.size} m does not match the map's {self.cell_size} m")
+        try:
+            return self._merge_cells(cells, options)
+        except shapely.errors.GEOSException as err:  # the last net: this map is unchanged
+            raise GeometryError(f"GEOS failed to merge {len(cells)} cells: {err}") from err
+
+    def _merge_cells(self, cells: list[Cell], options: MergeOptions | None) -> MergeResult:
         cells = self._cells_that_change(cells, options or MergeOptions())
         if not cells:
             return MergeResult(self, frozenset())
@@ -801,10 +810,10 @@ def _clip_to_cells(geom: shapely.Geometry, boxes: np.ndarray, expected_area: flo
             m = np.nonzero(bb[:, 0] == x0)[0]
             strip = shapely.clip_by_rect(geom, x0, gy0 - 1.0, bb[m[0], 2], gy1 + 1.0)
             for k in m:
-                out[k] = shapely.clip_by_rect(strip, *bb[k])
+                out[k] = _clip(strip, bb[k])
     else:
         for k, b in enumerate(bb):
-            out[k] = shapely.clip_by_rect(geom, *b)
+            out[k] = _clip(geom, b)
     out = _polygonal(out)
     if abs(float(shapely.area(out).sum()) - expected_area) > 1e-9 * max(1.0, expected_area):
         out = _polygonal(shapely.intersection(geom, boxes))
@@ -913,6 +922,16 @@ def _union_snapped(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if bad.any():
         out[bad] = shapely.union(a[bad], b[bad], grid_size=PRECISION_M)
     return out
+
+
+def _clip(geom, bounds) -> shapely.Geometry:
+    """``geom`` clipped to a rectangle. GEOS's fast clip raises on a ring that collapses
+    to 3 points (a scan corner exactly on a cell border); the exact intersection does
+    not."""
+    try:
+        return shapely.clip_by_rect(geom, *bounds)
+    except shapely.errors.GEOSException:
+        return shapely.intersection(geom, shapely.box(*bounds), grid_size=PRECISION_M)
 
 
 def _overlay(op, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -42,3 +42,15 @@ def star(center, radii, types) -> TypedPolygon:
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)
     xy = np.asarray(center) + np.stack([radii * np.cos(a), radii * np.sin(a)], axis=1)
     return TypedPolygon(Ring(xy, types))
+
+
+def room_scan(t: float = 0.0):
+    """A noise-free 270 degree scan from the centre of a 10 m square room (walls at
+    x, y = +-5 m), facing +x."""
+    from polyswarm.raycast import cast_rays
+    from polyswarm.scan import LaserScan
+
+    corners = np.array([(-5.0, -5.0), (5.0, -5.0), (5.0, 5.0), (-5.0, 5.0)])
+    angles = np.linspace(-2.35, 2.35, 361)
+    r = cast_rays((0.0, 0.0), angles, corners, np.roll(corners, -1, axis=0), 30.0)
+    return LaserScan(r.astype(np.float32), -2.35, angles[1] - angles[0], 0.1, 30.0, t)

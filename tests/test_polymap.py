@@ -346,3 +346,16 @@ def test_applying_a_delta_to_a_copy_reproduces_the_source(kfs):
         src = new
     assert copy.version == src.version and set(copy.cells) == set(src.cells)
     assert all(copy.cells[k].same_content(src.cells[k]) for k in src.cells)
+
+
+def test_a_keyframe_whose_ring_collapses_on_a_cell_border_merges():
+    # a noise-free scan of a square room from its centre, refined: GEOS's fast rectangle
+    # clip raised "Invalid number of points in LinearRing" on one of its cells
+    from polyswarm.config import Config
+    from polyswarm.slam import PolySlam
+    from tests.conftest import room_scan
+
+    slam = PolySlam(Config().slam)
+    step = slam.process(room_scan(0.0), (0.0, 0.0, 0.0))
+    assert step.keyframe and slam.rejected_keyframes == 0
+    assert slam.map.explored_area() > 20.0
