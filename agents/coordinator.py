@@ -67,6 +67,7 @@ EXCLUDE_S = 30.0  # a robot that failed a target is not sent there again for thi
 RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
 GOAL_RESET_M = 2.0  # ... and if this far, progress towards it is measured afresh
+STALLED_M = 1.0  # a robot that moved less than this while making no progress is stuck itself
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
 # no reachable target for this many cycles in a row (besides explore.end_confirm_s) ends
 # the mission: simulated seconds run faster than wall seconds, a loaded coordinator may
@@ -88,6 +89,7 @@ class RobotInfo:
     best_cost: float = math.inf
     progress_t: float = 0.0
     progress_goal: tuple[float, float] | None = None  # the goal best_cost was measured to
+    progress_xy: np.ndarray | None = None  # where the robot was at its last progress
     excluded: dict[int, float] = field(default_factory=dict)  # target id -> until
     reached_t: float | None = None  # when the robot reported its target reached
     behind_since: float | None = None  # the robot's map version is ahead of ours since
@@ -128,10 +130,12 @@ class Coordinator:
         self._no_target_cycles = 0
         self._last_cycle = -math.inf
         self._wake = True
-        self._pending_ms = 0.0  # merge time since the last cycle (counts into the cycle)
+        # merge time since the last cycle (counts into the cycle): wall and processor ms
+        self._pending_ms = self._pending_cpu_ms = 0.0
         self._pending: dict[str, set] = {}  # robot -> its cells changed since the last merge
         self._last_flush = -math.inf
         self.cycle_ms: list[float] = []
+        self.cycle_cpu_ms: list[float] = []  # this thread's processor time of each cycle
         self.now = 0.0
         self.bytes_sent = 0
 
@@ -205,8 +209,10 @@ class Coordinator:
             if a.kind == AssignmentKind.HOME:
                 info.home_failed = True  # exploring is over; a robot short of home is fine
                 log.info("robot %s cannot get home (%s)", rid, status.state)
-            else:
+            elif status.state == RobotState.UNREACHABLE:
                 self._failed(info, a.target, str(status.state))
+            # a robot stuck on its way to a frontier keeps trying; the progress watch
+            # (explore.no_progress_timeout_s) judges it, and whether the target is to blame
         elif (
             status.state == RobotState.REACHED
             and a.kind == AssignmentKind.EXPLORE
@@ -252,7 +258,7 @@ class Coordinator:
         self._last_flush = self.now
         if not self._pending:
             return None
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         base = self.merged.version
         queue = []
         for rid, idxs in sorted(self._pending.items()):
@@ -266,6 +272,7 @@ class Coordinator:
             self.graph.update(self.merged, {c.index for c in delta.cells})
             self._index = None
         self._pending_ms += (time.perf_counter() - t0) * 1e3
+        self._pending_cpu_ms += (time.thread_time() - c0) * 1e3
         return delta
 
     def _merge_batch(self, cells: list) -> None:
@@ -288,7 +295,7 @@ class Coordinator:
 
     def cycle(self) -> Outgoing:
         out = Outgoing(merged_delta=self.flush())
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         self._last_cycle = self.now
         self._wake = False
         live = [r for r in self.robots.values() if r.alive and r.pose is not None]
@@ -350,8 +357,10 @@ class Coordinator:
         for rid in out.assignments:
             self.robots[rid].sent_t = self.now
         ms = (time.perf_counter() - t0) * 1e3 + self._pending_ms
-        self._pending_ms = 0.0
+        cpu_ms = (time.thread_time() - c0) * 1e3 + self._pending_cpu_ms
+        self._pending_ms = self._pending_cpu_ms = 0.0
         self.cycle_ms.append(ms)
+        self.cycle_cpu_ms.append(cpu_ms)
         out.status = CoordinatorStatus(
             self.state,
             tuple(sorted(r.id for r in self.robots.values() if r.alive)),
@@ -360,6 +369,7 @@ class Coordinator:
             self.merged.explored_area(),
             ms,
             self.bytes_sent,
+            cpu_ms,
         )
         return out
 
@@ -464,8 +474,15 @@ class Coordinator:
             )
             if c < r.best_cost - PROGRESS_M or moved:
                 r.best_cost, r.progress_t, r.progress_goal = c, self.now, a.goal
+                r.progress_xy = r.pose[:2].copy()
             elif self.now - r.progress_t > timeout:
-                self._failed(r, a.target, f"no progress for {timeout:.0f} s")
+                # a robot that hardly moved is stuck itself (wedged, or its way blocked):
+                # that says nothing of the target, which stays open to the others
+                stalled = (
+                    r.progress_xy is not None and math.dist(r.progress_xy, r.pose[:2]) < STALLED_M
+                )
+                why = "robot stalled" if stalled else "no progress"
+                self._failed(r, a.target, f"{why} for {timeout:.0f} s", counts=not stalled)
 
     def _looked(self, r: RobotInfo) -> bool:
         """Has the robot looked at its reached target long enough, and has what it saw
@@ -475,14 +492,16 @@ class Coordinator:
             return False
         return r.map is not None and r.map.version >= r.announced and r.id not in self._pending
 
-    def _failed(self, r: RobotInfo, tid: int, why: str) -> None:
-        n = self.failures[tid] = self.failures.get(tid, 0) + 1
+    def _failed(self, r: RobotInfo, tid: int, why: str, counts: bool = True) -> None:
+        """``counts``: the failure counts towards blacklisting the target."""
+        n = self.failures.get(tid, 0) + counts
+        self.failures[tid] = n
         log.info("target %d failed by %s (%s), %d time(s)", tid, r.id, why, n)
         r.excluded[tid] = self.now + EXCLUDE_S
         r.best_cost, r.progress_t = math.inf, self.now
         r.assignment = None
         t = self.targets.get(tid)
-        if t is not None and n >= self.cfg.explore.blacklist_after_failures:
+        if counts and t is not None and n >= self.cfg.explore.blacklist_after_failures:
             self._blacklist(t, f"failed {n} times")
         self._wake = True
 

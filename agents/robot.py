@@ -443,10 +443,11 @@ class RobotAgent:
             self._best_remaining = remaining
             self._progress_t = now_s
         elif now_s - self._progress_t > STUCK_TIMEOUT_S:
-            self._set_state(RobotState.STUCK, f"no progress for {STUCK_TIMEOUT_S:.0f} s")
             self._progress_t = now_s
             self._best_remaining = math.inf
-            self._plan(now_s)
+            self._plan(now_s)  # a new path may get round what blocks this one
+            # after the replan (which says "navigating"): the status sent says stuck
+            self._set_state(RobotState.STUCK, f"no progress for {STUCK_TIMEOUT_S:.0f} s")
 
 
 def _priority(robot_id: str) -> tuple:

@@ -125,8 +125,14 @@ def test_coordinator_sends_one_robot_to_the_frontier_and_ends_when_it_closes():
     for rid in ("r1", "r2"):
         c.on_status(rid, c.now, RobotStatus(RobotState.HOME, c.robots[rid].assignment.target))
     c.now += 1.0
-    c.cycle()
+    out = c.cycle()
     assert c.state == MissionState.DONE
+    # every cycle's wall and processor time are kept and the last is in its status
+    assert len(c.cycle_cpu_ms) == len(c.cycle_ms) == cycles + 2  # + the first and last
+    assert all(
+        0.0 <= cpu <= wall + 1.0 for cpu, wall in zip(c.cycle_cpu_ms, c.cycle_ms, strict=True)
+    )
+    assert out.status.cycle_cpu_ms == c.cycle_cpu_ms[-1]
 
 
 def test_a_robot_that_leaves_frees_its_target_and_keeps_its_map():
@@ -154,7 +160,7 @@ def on_its_way() -> tuple[Coordinator, Assignment]:
 def test_the_mission_does_not_end_while_its_last_target_is_only_excluded():
     c, a = on_its_way()
     c.on_status("r1", c.now, RobotStatus(RobotState.NAVIGATING, a.target))
-    c.on_status("r1", c.now, RobotStatus(RobotState.STUCK, a.target))
+    c.on_status("r1", c.now, RobotStatus(RobotState.UNREACHABLE, a.target))
     for _ in range(10):  # failed once: excluded for a while, neither sent nor given up
         c.now += 1.0
         out = c.cycle()
@@ -163,6 +169,46 @@ def test_the_mission_does_not_end_while_its_last_target_is_only_excluded():
     c.now += EXCLUDE_S
     out = c.cycle()
     assert out.assignments["r1"].kind == AssignmentKind.EXPLORE  # tried again
+
+
+def test_a_robot_that_does_not_move_is_stuck_itself_and_the_target_stays_open():
+    timeout = Config().explore.no_progress_timeout_s
+    c, a = on_its_way()
+    # stuck reports on the way to a frontier are left to the progress watch
+    c.on_status("r1", c.now, RobotStatus(RobotState.STUCK, a.target))
+    assert c.failures == {} and c.robots["r1"].assignment.target == a.target
+    # the robot stands still for longer than the timeout, again and again: each time the
+    # target is taken from it, but none of these counts towards blacklisting the target
+    for _ in range(3):
+        for _ in range(int(timeout) + 10):
+            c.now += 1.0
+            c.on_pose("r1", c.now, Pose(1.0, 1.0, 0.0))
+            c.cycle()
+        c.now += EXCLUDE_S
+    assert c.failures.get(a.target, 0) == 0 and c.blacklist == []
+    # a robot that drives about without getting closer does fail the target
+    c.cycle()
+    b = c.robots["r1"].assignment
+    for k in range(int(timeout) + 10):
+        c.now += 1.0
+        c.on_pose("r1", c.now, Pose(1.0 + 0.5 * (k % 4), 1.0 + 0.2 * (k % 3), 0.0))
+        c.cycle()
+    assert c.failures.get(b.target, 0) == 1
+
+
+def test_a_robot_stuck_on_its_way_home_lets_the_mission_end():
+    c = coordinator(1)
+    feed(c, "r1", corridor_map(open_end=False), 0.1)  # explored: nothing left to see
+    c.now = 1.0
+    c.cycle()
+    c._end_exploration([c.robots["r1"]])
+    home = c.robots["r1"].assignment
+    assert home.kind == AssignmentKind.HOME
+    c.on_status("r1", c.now, RobotStatus(RobotState.NAVIGATING, home.target))
+    c.on_status("r1", c.now, RobotStatus(RobotState.STUCK, home.target))
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.DONE
 
 
 def test_a_reached_target_is_judged_on_the_map_the_robot_saw():
