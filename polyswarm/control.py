@@ -29,6 +29,7 @@ LOOKAHEAD_STEPS = (1.0, 0.7, 0.45, 0.25)  # fractions of the lookahead tried for
 ESCAPE_MPS = 0.05  # pressed against an obstacle ahead: back off this slowly...
 ESCAPE_TRIGGER_M = 0.02  # ... when something is this much inside the safety margin
 ESCAPE_CHECK_M = 0.15  # ... and the way back is clear for this far
+INSIDE_SLACK_M = 0.005  # an arc may pass a point inside the margin this much closer than now
 
 
 class Follow(StrEnum):
@@ -168,6 +169,7 @@ class PathFollower:
         err = np.abs(wrap(to_carrot - self._end_heading))
         gain = np.hypot(*carrot) - np.hypot(*(carrot - end).T)
         forward = self._v > 0
+        now = np.hypot(obs[:, 0], obs[:, 1])  # distance of each point from the robot now
         for need, dyn, v_cap in (
             (p.radius_m + p.safety_margin_m, p.dynamic_margin_m, p.max_v_mps),
             # squeeze past slowly
@@ -175,9 +177,15 @@ class PathFollower:
         ):
             if dist.shape[1]:
                 clear = (dist - dyn * moving[None, :]).min(axis=1)
+                # a point already inside the margin (a robot that came close, a wall the
+                # map does not explain yet) only forbids arcs that get closer still: the
+                # robot may always move away from it, or it would wait there for ever
+                req = np.minimum(need + dyn * moving, now - INSIDE_SLACK_M)
+                safe = (dist >= req[None, :]).all(axis=1)
             else:
                 clear = np.full(len(self._v), np.inf)
-            ok = forward & (clear >= need) & (self._v <= v_cap + 1e-9) & (gain > 0)
+                safe = np.ones(len(self._v), dtype=bool)
+            ok = forward & safe & (self._v <= v_cap + 1e-9) & (gain > 0)
             if ok.any():
                 score = (
                     2.0 * gain / max(p.max_v_mps * p.horizon_s, 1e-9)

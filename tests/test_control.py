@@ -31,6 +31,20 @@ def test_blocked_with_a_wall_behind_too_it_waits():
     assert cmd.state == Follow.BLOCKED and cmd.v_mps == 0 and cmd.w_radps == 0
 
 
+def test_an_unexplained_wall_inside_the_margin_only_forbids_getting_closer():
+    # a wall 0.28 m to the left that the robot's map does not explain (kept 0.2 m farther
+    # away than walls are): inside that margin from the start, every arc used to be
+    # refused and the robot, facing its carrot, waited there for ever (seen in a maze run)
+    wall = np.array([[x, 0.28] for x in np.linspace(-1.0, 1.0, 41)])
+    cmd = follower([[0, 0], [5, 0]]).command((0, 0, 0), wall, np.ones(len(wall), dtype=bool))
+    assert cmd.state == Follow.DRIVING and cmd.v_mps > 0 and cmd.w_radps <= 0  # along or away
+    # a carrot beyond the wall still cannot pull the robot into it
+    cmd = follower([[0, 0], [0.5, 0.1], [5, 0.3]]).command(
+        (0, 0, 0), wall, np.ones(len(wall), dtype=bool)
+    )
+    assert cmd.v_mps <= 0 or cmd.w_radps <= 0
+
+
 def test_carrot_behind_a_door_jamb_is_replaced_by_one_in_sight():
     # path: 0.5 m east, then north through a gap; the jamb at (0.25, 0.3) hides the far
     # carrot (0.5, 0.5): heading for it would cut the corner into the jamb
