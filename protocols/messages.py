@@ -336,8 +336,9 @@ class CoordinatorStatus(Message):
     frontiers: int = 0
     map_version: int = 0
     explored_m2: float = 0.0
-    cycle_ms: float = 0.0
+    cycle_ms: float = 0.0  # wall time of the last cycle (merges since the previous one included)
     bytes_sent: int = 0
+    cycle_cpu_ms: float = 0.0  # the same cycle's processor time (not time spent preempted)
 
     def body(self) -> dict:
         return {
@@ -348,6 +349,7 @@ class CoordinatorStatus(Message):
             "area": self.explored_m2,
             "cycle_ms": self.cycle_ms,
             "bytes": self.bytes_sent,
+            "cpu_ms": self.cycle_cpu_ms,
         }
 
     @classmethod
@@ -366,6 +368,7 @@ class CoordinatorStatus(Message):
             _num(b.get("area", 0.0), "area", 0.0),
             _num(b.get("cycle_ms", 0.0), "cycle_ms", 0.0),
             _int(b.get("bytes", 0), "bytes", 0),
+            _num(b.get("cpu_ms", 0.0), "cpu_ms", 0.0),
         )
 
 

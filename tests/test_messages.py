@@ -20,6 +20,7 @@ from protocols.messages import (
     Assignment,
     AssignmentKind,
     Clock,
+    CoordinatorStatus,
     MapChunk,
     MapKind,
     Odometry,
@@ -44,6 +45,14 @@ def test_round_trip_keeps_every_field_and_the_envelope(msg):
     env, back = decode(encode(msg, "r1", 42, 123.5))
     assert (env.type, env.sender, env.seq, env.stamp_s) == (msg.TYPE, "r1", 42, 123.5)
     assert back == msg
+
+
+def test_coordinator_status_without_the_optional_cpu_ms_decodes_with_zero():
+    status = dict(golden_messages())["coordinator-status"]
+    raw = msgpack.unpackb(encode(status, "coordinator", 3, 1.0))
+    assert raw.pop("cpu_ms") == status.cycle_cpu_ms > 0
+    _, back = decode(msgpack.packb(raw), CoordinatorStatus)
+    assert back.cycle_cpu_ms == 0.0 and back.cycle_ms == status.cycle_ms
 
 
 def test_scan_round_trip_keeps_inf_and_nan_beams():

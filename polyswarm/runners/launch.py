@@ -101,6 +101,10 @@ class LaunchOptions:
     verbose: bool = False
     faults: tuple[Fault, ...] = ()  # fault injection (tests of reliability)
     link_faults: str = ""  # message loss/duplication/reordering at coordinator and agents
+    # niceness of the simulator and agent processes: on one computer they stand for the
+    # robots' own computers, and ten of them must not starve the coordinator and router
+    # (the fleet's shared machine); 0 runs everything at the same priority
+    robots_nice: int = 5
 
 
 @dataclass
@@ -140,6 +144,7 @@ class Observer:
         self.mission = MissionState.STARTING
         self.coordinator: CoordinatorStatus | None = None
         self.cycle_ms: list[float] = []
+        self.cycle_cpu_ms: list[float] = []
         self.coverage: list[tuple[float, float]] = []
         self.collisions = (0, 0)
         self._cell_cover: dict = {}  # cell index -> (cell version, covered m2)
@@ -199,6 +204,7 @@ class Observer:
             self.coordinator = msg
             self.mission = msg.state
             self.cycle_ms.append(msg.cycle_ms)
+            self.cycle_cpu_ms.append(msg.cycle_cpu_ms)
             if msg.map_version > self.merged.version:  # a late or lost delta
                 self._behind = self._behind if self._behind is not None else time.monotonic()
                 if time.monotonic() - self._behind > 1.0:
@@ -247,6 +253,9 @@ class Observer:
             "coordinator_cycle_p95_ms": (
                 float(np.percentile(self.cycle_ms, 95)) if self.cycle_ms else None
             ),
+            "coordinator_cycle_cpu_p95_ms": (
+                float(np.percentile(self.cycle_cpu_ms, 95)) if self.cycle_cpu_ms else None
+            ),
             "merged_map_bytes": None,
             "wall_time_s": wall_s,
             "coordinator_rss_mb_over_time": [
@@ -272,10 +281,16 @@ class Child:
     args: list[str] = field(default_factory=list)
     verbose: bool = False
     env: dict = field(default_factory=dict)
+    nice: int = 0
 
 
 def _spawn(
-    name: str, args: list[str], logs: Path, verbose: bool, extra_env: dict | None = None
+    name: str,
+    args: list[str],
+    logs: Path,
+    verbose: bool,
+    extra_env: dict | None = None,
+    nice: int = 0,
 ) -> Child:
     log_path = logs / f"{name}.log"
     f = open(log_path, "a")  # noqa: SIM115 - kept open for the child's lifetime
@@ -283,7 +298,12 @@ def _spawn(
     env = dict(os.environ, PYTHONUNBUFFERED="1", **(extra_env or {}))
     proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
     f.close()
-    return Child(name, proc, log_path, args, verbose, extra_env or {})
+    if nice:
+        try:  # after the start (a preexec_fn is unsafe with the launcher's Zenoh threads)
+            os.setpriority(os.PRIO_PROCESS, proc.pid, os.getpriority(os.PRIO_PROCESS, 0) + nice)
+        except OSError as e:
+            log.warning("could not lower the priority of %s: %s", name, e)
+    return Child(name, proc, log_path, args, verbose, extra_env or {}, nice)
 
 
 def _rss_mb(child: Child | None) -> float | None:
@@ -310,7 +330,7 @@ def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
         if c.proc.poll() is None:
             c.proc.kill()
             c.proc.wait()
-        children[k] = _spawn(c.name, c.args, logs, c.verbose, c.env)
+        children[k] = _spawn(c.name, c.args, logs, c.verbose, c.env, c.nice)
     else:
         sig = {
             FaultAction.KILL: signal.SIGKILL,
@@ -413,11 +433,11 @@ def launch(
         ]
         sim_args += ["--speed", str(opts.speed), "--wait-coordinator"]
         sim_args += ["--gui"] if opts.gui else []
-        children.append(_spawn("sim", sim_args, logs, opts.verbose))
+        nice = opts.robots_nice
+        children.append(_spawn("sim", sim_args, logs, opts.verbose, nice=nice))
         for rid in ids:
-            children.append(
-                _spawn(rid, ["agent", "--id", rid, "--config", conf], logs, opts.verbose, faulty)
-            )
+            agent_args = ["agent", "--id", rid, "--config", conf]
+            children.append(_spawn(rid, agent_args, logs, opts.verbose, faulty, nice))
         with open_session(SessionSpec.client(cfg.comms.endpoint)) as session:
             bus = Bus(session, "observer")
             try:

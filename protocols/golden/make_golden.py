@@ -71,7 +71,7 @@ def golden_messages() -> list[tuple[str, object]]:
         ),
         (
             "coordinator-status",
-            CoordinatorStatus(MissionState.EXPLORING, ("r1", "r2"), 3, 11, 42.0, 12.5, 1000),
+            CoordinatorStatus(MissionState.EXPLORING, ("r1", "r2"), 3, 11, 42.0, 12.5, 1000, 9.25),
         ),
         ("clock", Clock(12.5, 9.75)),
         ("truth", Truth({"r1": (1.0, 2.0, 0.5)}, 0, 0)),
