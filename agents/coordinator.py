@@ -10,7 +10,8 @@ a robot reached or failed its target, joined or left):
   3. assignment by strategy (hungarian / greedy / nearest) with hysteresis;
   4. failures: unreachable, stuck, or no progress for a timeout count against a
      target; after ``blacklist_after_failures`` it is blacklisted. A target reached
-     whose frontier is still there counts as a failure;
+     whose frontier is still there after the robot looked at it is blacklisted after
+     ``blacklist_after_looks`` such looks;
   5. mission end: no reachable target for ``end_confirm_s`` and ``END_CONFIRM_CYCLES``
      cycles in a row, with every robot's map merged -> robots return to their start
      poses -> done.
@@ -124,6 +125,7 @@ class Coordinator:
         # robots must not take a new target for the one they already reached
         self._next_id = int(time.time() * 10) % 1_000_000_000
         self.failures: dict[int, int] = {}
+        self.looks: dict[int, int] = {}  # target id -> robots that stood there and looked
         self.blacklist: list[np.ndarray] = []
         self.state = MissionState.STARTING
         self._no_target_since: float | None = None
@@ -464,7 +466,12 @@ class Coordinator:
                 # the robot stood there and looked; another look (from another goal, as
                 # the map has grown meanwhile) may still close it: a failure, not a verdict
                 r.reached_t = None
+                n = self.looks[a.target] = self.looks.get(a.target, 0) + 1
+                t = self.targets.get(a.target)
                 self._failed(r, a.target, "reached, frontier still open")
+                given_up = t is None or any(np.array_equal(b, t.goal) for b in self.blacklist)
+                if n >= self.cfg.explore.blacklist_after_looks and not given_up:
+                    self._blacklist(t, f"looked at {n} time(s), still open")
                 continue
             c = costs[k, ids.index(a.target)]
             # a frontier that retreats as the robot drives (down a long corridor) moves

@@ -197,6 +197,10 @@ class ExploreConfig:
     min_frontier_length_m: float = 0.4  # shorter frontier segments are not targets
     max_frontier_length_m: float = 4.0  # longer ones are split, so robots can share them
     blacklist_after_failures: int = 2
+    # a robot stood at the goal and looked, yet the frontier stayed open: after this many
+    # such looks it is a frontier that looking does not close (mostly wall faces seen at
+    # a grazing angle); on the maze, 2 looks cost 3 robots a tenth of the mission
+    blacklist_after_looks: int = 1
     no_progress_timeout_s: float = 20.0  # path cost to the target must shrink within this
     hysteresis: float = 0.8  # a new target must cost less than this times the current one
     target_separation_m: float = 3.0  # targets of different robots at least this far apart
@@ -410,6 +414,9 @@ def validate(cfg: Config) -> None:
         raise ConfigError("sim.robot.radius_m must be positive")
     if cfg.sim.raycast_threads < 0:
         raise ConfigError("sim.raycast_threads must be 0 (every core) or a thread count")
+    for name in ("blacklist_after_failures", "blacklist_after_looks"):
+        if getattr(cfg.explore, name) < 1:
+            raise ConfigError(f"explore.{name} must be at least 1")
     if cfg.explore.strategy not in ("hungarian", "greedy", "nearest"):
         raise ConfigError(
             f"explore.strategy must be hungarian, greedy or nearest, got {cfg.explore.strategy!r}"

@@ -228,6 +228,9 @@ def test_a_reached_target_is_judged_on_the_map_the_robot_saw():
     c.now += 1.0
     c.cycle()
     assert c.failures == {a.target: 1}
+    # looking did not close it (explore.blacklist_after_looks = 1): it is given up
+    assert c.looks == {a.target: 1}
+    assert any(np.allclose(b, a.goal) for b in c.blacklist)
 
 
 def test_repeated_failures_blacklist_a_target():
