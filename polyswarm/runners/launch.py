@@ -49,6 +49,9 @@ from protocols.messages import (
 log = logging.getLogger(__name__)
 
 SHUTDOWN_S = 4.0  # children get this long to exit after SIGTERM before SIGKILL
+HUB = ("coordinator", "router")  # stopped last, so they receive what the robots sent last
+HUB_SHUTDOWN_S = 1.5  # ... and given this much of SHUTDOWN_S (writing the coordinator's
+#                       state is appending to its journal, not rewriting maps)
 RSS_EVERY_S = 5.0  # wall seconds between memory samples of the coordinator
 COVERAGE_EVERY_S = 1.0  # simulated seconds between coverage samples
 FINAL_FETCH_S = 2.0  # wall seconds to wait for the merged map at the end of a run
@@ -342,18 +345,25 @@ def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
 
 
 def _stop_children(children: list[Child]) -> dict[str, int | None]:
-    for c in children:
-        if c.proc.poll() is None:
-            c.proc.send_signal(signal.SIGCONT)  # a frozen child could not stop
-            c.proc.send_signal(signal.SIGTERM)
+    """The simulator and agents first, then (once they are gone, so that the last deltas
+    they sent reach the coordinator) the coordinator and router; SHUTDOWN_S in all."""
     deadline = time.monotonic() + SHUTDOWN_S
-    for c in children:
-        try:
-            c.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            log.warning("%s did not stop in %.0f s: killed", c.name, SHUTDOWN_S)
-            c.proc.kill()
-            c.proc.wait()
+    hub = [c for c in children if c.name in HUB]
+    for group, until in (
+        ([c for c in children if c.name not in HUB], deadline - HUB_SHUTDOWN_S),
+        (hub, deadline),
+    ):
+        for c in group:
+            if c.proc.poll() is None:
+                c.proc.send_signal(signal.SIGCONT)  # a frozen child could not stop
+                c.proc.send_signal(signal.SIGTERM)
+        for c in group:
+            try:
+                c.proc.wait(timeout=max(0.0, until - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop in time: killed", c.name)
+                c.proc.kill()
+                c.proc.wait()
     return {c.name: c.proc.returncode for c in children}
 
 
