@@ -8,8 +8,9 @@ a robot reached or failed its target, joined or left):
   1. frontier targets of the merged map (reachable goal points, blacklist applied);
   2. path costs from every robot over the merged map's navigation graph;
   3. assignment by strategy (hungarian / greedy / nearest) with hysteresis;
-  4. failures: unreachable, stuck, or no progress for a timeout count against a
-     target; after ``blacklist_after_failures`` it is blacklisted. A target reached
+  4. failures: unreachable, or no progress for a timeout (unless the robot itself hardly
+     moved: then it is stuck, not the target) count against a target; after
+     ``blacklist_after_failures`` it is blacklisted. A target reached
      whose frontier is still there after the robot looked at it is blacklisted after
      ``blacklist_after_looks`` such looks;
   5. mission end: no reachable target for ``end_confirm_s`` and ``END_CONFIRM_CYCLES``
@@ -125,7 +126,7 @@ class Coordinator:
         # robots must not take a new target for the one they already reached
         self._next_id = int(time.time() * 10) % 1_000_000_000
         self.failures: dict[int, int] = {}
-        self.looks: dict[int, int] = {}  # target id -> robots that stood there and looked
+        self.looks: dict[int, int] = {}  # target id -> looks from its goal that left it open
         self.blacklist: list[np.ndarray] = []
         self.state = MissionState.STARTING
         self._no_target_since: float | None = None
@@ -463,8 +464,10 @@ class Coordinator:
             if a is None or a.kind != AssignmentKind.EXPLORE or a.target not in ids:
                 continue
             if self._looked(r):
-                # the robot stood there and looked; another look (from another goal, as
-                # the map has grown meanwhile) may still close it: a failure, not a verdict
+                # the robot stood there and looked, and the frontier is still open: a
+                # failure, and after explore.blacklist_after_looks such looks given up
+                # (another look from elsewhere could close it, but on the maze a second
+                # look rarely did and cost more than the frontiers were worth)
                 r.reached_t = None
                 n = self.looks[a.target] = self.looks.get(a.target, 0) + 1
                 t = self.targets.get(a.target)
