@@ -101,24 +101,12 @@ def fit_first_line(pts: np.ndarray, cfg: RefineConfig) -> LineFit:
     good line already broke, so longer prefixes would not change the answer.
     """
     m = len(pts) - 1
-    if m == 1:  # one vector is its own line (a third of the fits: corners, frontier arcs)
-        return _one_vector(pts, cfg)
     K = min(m, FIRST_WINDOW)
     while True:
         fit = _fit_prefixes(pts, K, cfg)
         if min(m, MAX_PREFIX) <= K or fit.n_vectors <= K // 2:
             return fit
         K = min(4 * K, m, MAX_PREFIX)
-
-
-def _one_vector(pts: np.ndarray, cfg: RefineConfig) -> LineFit:
-    """``_fit_prefixes(pts, 1, cfg)`` without arrays: the line through both points."""
-    (x0, y0), (x1, y1) = pts[0], pts[1]
-    dx, dy = x1 - x0, y1 - y0
-    phi = 0.5 * math.atan2(0.5 * dx * dy, 0.25 * (dx * dx - dy * dy))  # as in _pca_lines
-    w = (2.0 / (2.0 + cfg.score_a)) ** cfg.score_b
-    centroid = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
-    return LineFit(1, centroid, np.array([-math.sin(phi), math.cos(phi)]), w / cfg.score_c)
 
 
 def _fit_prefixes(pts: np.ndarray, K: int, cfg: RefineConfig) -> LineFit:

@@ -14,13 +14,7 @@ from polyswarm.config import RefineConfig
 from polyswarm.keyframe import keyframe_polygon
 from polyswarm.polymap import Ring, TypedPolygon
 from polyswarm.raycast import cast_rays
-from polyswarm.refine import (
-    _fit_prefixes,
-    fit_chain,
-    fit_first_line,
-    refine_polygon,
-    refine_ring,
-)
+from polyswarm.refine import fit_chain, fit_first_line, refine_polygon, refine_ring
 from polyswarm.scan import LaserScan, scan_to_points
 from tests.conftest import F, O
 
@@ -33,19 +27,6 @@ def test_score_is_formula_3_9():
     fit = fit_first_line(pts, CFG)
     assert fit.n_vectors == 10
     assert fit.score == pytest.approx((11 / 12) ** 4 / 0.001)
-
-
-@given(st.lists(st.floats(-20, 20), min_size=4, max_size=4))
-def test_a_one_vector_chain_is_fitted_as_algorithm_3_would(c):
-    # the shortcut for one vector gives the line the general prefix fit gives
-    pts = np.array(c).reshape(2, 2)
-    if np.hypot(*(pts[1] - pts[0])) < 1e-6:
-        return
-    fast, general = fit_first_line(pts, CFG), _fit_prefixes(pts, 1, CFG)
-    assert fast.n_vectors == general.n_vectors == 1
-    np.testing.assert_allclose(fast.point, general.point, atol=1e-9)
-    assert abs(float(np.dot(fast.normal, general.normal))) == pytest.approx(1.0)
-    assert fast.score == pytest.approx(general.score, rel=1e-6)
 
 
 def test_noisy_straight_wall_becomes_one_vector():
