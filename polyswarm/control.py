@@ -179,8 +179,10 @@ class PathFollower:
                 clear = (dist - dyn * moving[None, :]).min(axis=1)
                 # a point already inside the margin (a robot that came close, a wall the
                 # map does not explain yet) only forbids arcs that get closer still: the
-                # robot may always move away from it, or it would wait there for ever
+                # robot may always move away from it, or it would wait there for ever;
+                # never closer than the creeping margin (the slack must not add up)
                 req = np.minimum(need + dyn * moving, now - INSIDE_SLACK_M)
+                req = np.maximum(req, p.radius_m + CREEP_MARGIN_M)
                 safe = (dist >= req[None, :]).all(axis=1)
             else:
                 clear = np.full(len(self._v), np.inf)

@@ -59,3 +59,25 @@ def test_segment_clearance_by_hand():
     pts = np.array([[1.0, 1.0], [3.0, 0.0], [-1.0, 0.0]])
     assert _segment_clearance(np.array([2.0, 0.0]), pts) == 1.0
     assert _segment_clearance(np.array([2.0, 0.0]), np.zeros((0, 2))) == float("inf")
+
+
+def test_points_inside_the_margin_never_draw_the_robot_into_contact():
+    # unexplained points 1-2 cm outside the robot's disc, around the path: each step may
+    # get a few millimetres closer to a point than the step before, and that slack must
+    # not add up to contact over many steps
+    rng = np.random.default_rng(3)
+    for trial in range(20):
+        a = rng.uniform(-2.0, 2.0, 2)
+        r = rng.uniform(0.212, 0.23, 2)  # two points just outside the disc...
+        near = np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+        pts = np.vstack([near, rng.uniform([0.5, -0.6], [3.0, 0.6], size=(3, 2))])
+        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) > 0.212]  # ... and a few farther on
+        f = follower([[0, 0], [3, rng.uniform(-0.5, 0.5)]])
+        pose = np.zeros(3)
+        for _ in range(80):  # 8 s at 10 Hz, unicycle kinematics
+            c, s = np.cos(pose[2]), np.sin(pose[2])
+            d = pts - pose[:2]
+            local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
+            cmd = f.command(pose, local, np.ones(len(pts), dtype=bool))
+            pose = pose + 0.1 * np.array([cmd.v_mps * c, cmd.v_mps * s, cmd.w_radps])
+            assert np.hypot(*(pts - pose[:2]).T).min() >= 0.2, trial  # radius 0.2 m
