@@ -359,3 +359,22 @@ def test_a_keyframe_whose_ring_collapses_on_a_cell_border_merges():
     step = slam.process(room_scan(0.0), (0.0, 0.0, 0.0))
     assert step.keyframe and slam.rejected_keyframes == 0
     assert slam.map.explored_area() > 20.0
+
+
+def test_a_geos_error_left_in_the_merge_is_a_geometry_error_and_slam_goes_on(monkeypatch):
+    from polyswarm.config import Config
+    from polyswarm.errors import GeometryError
+    from polyswarm.polymap import GridPolyMap as Map
+    from polyswarm.slam import PolySlam
+    from tests.conftest import room_scan
+
+    def fail(*args, **kwargs):
+        raise shapely.errors.GEOSException("TopologyException: side location conflict")
+
+    monkeypatch.setattr(Map, "_merge_geometry", fail)
+    with pytest.raises(GeometryError, match="GEOS failed"):
+        GridPolyMap(2.0).merge(rect(0.0, 0.0, 1.0, 1.0))
+    slam = PolySlam(Config().slam)
+    step = slam.process(room_scan(0.0), (0.0, 0.0, 0.0))  # logged and counted, no crash
+    assert step.keyframe and step.delta is None
+    assert slam.rejected_keyframes == 1 and slam.map.cells == {}
