@@ -29,6 +29,7 @@ LOOKAHEAD_STEPS = (1.0, 0.7, 0.45, 0.25)  # fractions of the lookahead tried for
 ESCAPE_MPS = 0.05  # pressed against an obstacle ahead: back off this slowly...
 ESCAPE_TRIGGER_M = 0.02  # ... when something is this much inside the safety margin
 ESCAPE_CHECK_M = 0.15  # ... and the way back is clear for this far
+ESCAPE_TURN_RADPS = 0.5  # blocked with the carrot ahead: turn away from the nearest point
 INSIDE_SLACK_M = 0.005  # an arc may pass a point inside the margin this much closer than now
 
 
@@ -196,9 +197,15 @@ class PathFollower:
                 )
                 k = int(np.argmax(np.where(ok, score, -np.inf)))
                 return Command(float(self._v[k]), float(self._w[k]), Follow.DRIVING)
-        # nothing moving forward is safe: turn towards the carrot (a round robot turning
-        # in place touches nothing); pressed against something in front, back away from
-        # it; else wait for the way to clear
+        # nothing moving forward is safe: turn (a round robot turning in place touches
+        # nothing) away from the nearest point in front when the carrot lies ahead or on
+        # that point's side (turning towards the carrot there changes nothing: the robot
+        # would wait in front of a corner for ever), else towards the carrot; pressed
+        # against something in front, back away from it; else wait for the way to clear
+        blocker = _nearest_in_front(obstacles, reach)
+        if blocker is not None and (abs(bearing) <= 0.15 or bearing * blocker[1] > 0):
+            w = -math.copysign(ESCAPE_TURN_RADPS, blocker[1])
+            return Command(0.0, w, Follow.BLOCKED)
         if abs(bearing) > 0.15:
             w = math.copysign(min(p.max_w_radps, 2.0 * abs(bearing)), bearing)
             return Command(0.0, w, Follow.BLOCKED)
@@ -220,6 +227,20 @@ class PathFollower:
         lateral = np.abs(obstacles[:, 1]) < p.radius_m + CREEP_MARGIN_M
         reach = obstacles[:, 0] > -(p.radius_m + CREEP_MARGIN_M + ESCAPE_CHECK_M)
         return not (behind & lateral & reach).any()
+
+
+def _nearest_in_front(points: np.ndarray, within_m: float) -> np.ndarray | None:
+    """The nearest point ahead of the robot (x > 0, robot frame) closer than ``within_m``,
+    off the heading by more than a centimetre (straight ahead, turning either way helps
+    no more than backing off)."""
+    if not len(points):
+        return None
+    d = np.hypot(points[:, 0], points[:, 1])
+    ok = (points[:, 0] > 0) & (d < within_m)
+    if not ok.any():
+        return None
+    k = int(np.argmin(np.where(ok, d, np.inf)))
+    return points[k] if abs(points[k, 1]) > 0.01 else None
 
 
 def _segment_clearance(end: np.ndarray, points: np.ndarray) -> float:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import shapely
 
 from polyswarm.control import ControlParams, Follow, PathFollower, _segment_clearance
 
@@ -81,3 +82,29 @@ def test_points_inside_the_margin_never_draw_the_robot_into_contact():
             cmd = f.command(pose, local, np.ones(len(pts), dtype=bool))
             pose = pose + 0.1 * np.array([cmd.v_mps * c, cmd.v_mps * s, cmd.w_radps])
             assert np.hypot(*(pts - pose[:2]).T).min() >= 0.2, trial  # radius 0.2 m
+
+
+def test_blocked_in_front_of_a_corner_with_the_carrot_ahead_it_turns_away_and_passes():
+    # seen in a maze run: a robot beside the end of a wall, 0.27 m from its corner, the
+    # wall not yet in its map (kept 0.2 m farther away than walls), its carrot straight
+    # ahead past the corner. Every forward arc got closer to the corner and was refused,
+    # and the carrot was too far ahead of the heading to turn to it: the robot stood
+    # there for 300 simulated seconds. Map frame, metres: the wall's end, then its face
+    # running north
+    stub = shapely.Polygon(
+        [(3.6, -41.5), (3.6, -44.0), (3.8, -44.0), (3.8, -44.2), (4.0, -44.2), (4.0, -41.5)]
+    )
+    ring = stub.exterior
+    pts = np.array(
+        [ring.interpolate(t).coords[0] for t in np.arange(0.0, ring.length, 0.01)], dtype=float
+    )
+    f = follower([[3.537, -44.272], [3.3, -43.5], [3.2, -40.0]])
+    pose = np.array([3.537, -44.272, 2.057])  # heading 118 degrees
+    for _ in range(150):  # 15 s at 10 Hz, unicycle kinematics
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        d = pts - pose[:2]
+        local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
+        cmd = f.command(pose, local, np.ones(len(pts), dtype=bool))
+        pose = pose + 0.1 * np.array([cmd.v_mps * c, cmd.v_mps * s, cmd.w_radps])
+        assert shapely.distance(stub, shapely.Point(pose[:2])) >= 0.2  # radius 0.2 m
+    assert pose[1] > -42.0  # past the wall's end, on its way north
