@@ -119,7 +119,11 @@ class Coordinator:
         # a wall seen at a grazing angle by one robot (a chord of frontier vectors just
         # behind it) and head-on by another (an obstacle a centimetre in front) is a wall:
         # with the exact union the chord stays the boundary and its frontier never closes
-        self._merge_options = MergeOptions(obstacle_snap_m=cfg.slam.obstacle_snap_m)
+        self._merge_options = MergeOptions(
+            obstacle_snap_m=cfg.slam.obstacle_snap_m,
+            obstacle_snap_behind_m=cfg.slam.obstacle_snap_behind_m,
+            obstacle_snap_front_m=cfg.slam.obstacle_snap_front_m,
+        )
         self.targets: dict[int, Target] = {}
         self._target_cache = TargetCache()  # frontier facts reused while their cells stay
         # target ids differ from those of an earlier run of the coordinator (a restart):

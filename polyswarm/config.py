@@ -173,6 +173,12 @@ class SlamConfig:
     notch_fill_m: float = 0.01  # walls smoothed across keyframes: notches this shallow filled
     min_growth_m: float = 0.05  # new explored space thinner than this is noise along walls
     obstacle_snap_m: float = 0.05  # a frontier this close along a wall is that wall
+    # a frontier lying all along beside a wall, at most this far inside it or in front of
+    # it, is that wall (the chord of a grazing view of a face another view saw head-on).
+    # On the maze, robots were sent to look at such faces, 2-5 cm off, and looking did not
+    # close them. Inside: thinner than walls. In front: more than min_growth_m plus noise
+    obstacle_snap_behind_m: float = 0.1
+    obstacle_snap_front_m: float = 0.08
     obstacle_max_gap_m: float = 0.5  # consecutive points farther apart become a frontier...
     obstacle_gap_beams: float = 4.0  # ...unless within this many beam spacings at their range
     icp: IcpConfig = field(default_factory=IcpConfig)
@@ -417,6 +423,9 @@ def validate(cfg: Config) -> None:
     for name in ("blacklist_after_failures", "blacklist_after_looks"):
         if getattr(cfg.explore, name) < 1:
             raise ConfigError(f"explore.{name} must be at least 1")
+    for name in ("obstacle_snap_behind_m", "obstacle_snap_front_m"):
+        if not (0.0 <= getattr(cfg.slam, name) <= 0.5):
+            raise ConfigError(f"slam.{name} must be 0-0.5 m (0: off)")
     if cfg.explore.strategy not in ("hungarian", "greedy", "nearest"):
         raise ConfigError(
             f"explore.strategy must be hungarian, greedy or nearest, got {cfg.explore.strategy!r}"

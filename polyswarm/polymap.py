@@ -50,6 +50,8 @@ SECTOR_TOL_M = 3 * PRECISION_M  # explored space this close across a border cont
 # for 280 s at 55 % coverage).
 SECTOR_GAP_M = 0.05
 SNAP_ANGLE_DEG = 15.0  # a frontier snapped to an obstacle must run within this of it
+BESIDE_STEP_M = 0.05  # a frontier beside a wall is tested at points this far apart...
+BESIDE_ENDS_M = 0.02  # ... each beside an obstacle vector or this close past its ends
 # Growth narrower than this everywhere is rounding noise, not new space: rounding an
 # intersection point moves a vector by at most 0.71 grid steps, and merging a polygon
 # again can meet such a vertex from the other side (measured: slivers up to ~1.4 steps).
@@ -275,11 +277,20 @@ class MergeOptions:
       vectors in one keyframe and an obstacle, a centimetre off, in the next.
     * ``notch_fill_m``: shallow notches between obstacle vectors are filled
       (``fill_notches``), so walls do not collect teeth from every keyframe.
+    * ``obstacle_snap_behind_m``, ``obstacle_snap_front_m``: a frontier lying, along its
+      whole length, beside obstacle vectors running the same way, at most the first
+      distance behind them (inside the wall they face) or the second in front of them,
+      is that wall. A keyframe that saw a wall face at a grazing angle leaves a frontier
+      chord a few centimetres inside or in front of the wall; another sees the face
+      head-on. The union keeps a chord inside the wall (explored space never shrinks),
+      ``min_growth_m`` keeps one in front of it, and robots were sent to look at them.
     """
 
     min_growth_m: float = 0.0
     obstacle_snap_m: float = 0.0
     notch_fill_m: float = 0.0
+    obstacle_snap_behind_m: float = 0.0
+    obstacle_snap_front_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -454,7 +465,9 @@ class GridPolyMap:
             np.array([mine[i].region for i in k], dtype=object),
             np.array([cells[i].region for i in k], dtype=object),
         )
-        tol = max(MATCH_TOL_M, opt.obstacle_snap_m)
+        tol = max(
+            MATCH_TOL_M, opt.obstacle_snap_m, opt.obstacle_snap_behind_m, opt.obstacle_snap_front_m
+        )
         for i in np.nonzero(covered)[0]:
             os, oe = cells[i].obstacle_vectors
             fs, fe = mine[i].vectors_of_type(VectorType.FRONTIER)
@@ -540,6 +553,7 @@ class GridPolyMap:
             neighbour_region,
             self.cells,
             opt.obstacle_snap_m,
+            (opt.obstacle_snap_behind_m, opt.obstacle_snap_front_m),
         )
         version = self.version + 1
         out = dict(self.cells)
@@ -1002,6 +1016,7 @@ def _typed_cells(
     new_regions: Mapping[CellIndex, shapely.Geometry],
     old_cells: Mapping[CellIndex, Cell],
     obstacle_snap_m: float = 0.0,
+    snap_beside_m: tuple[float, float] = (0.0, 0.0),
 ) -> dict[CellIndex, Cell]:
     """Turn merged cell regions into cells of canonical typed rings.
 
@@ -1066,7 +1081,9 @@ def _typed_cells(
                 touch[has] = near
             types[cand[touch]] = VectorType.SECTOR
 
-    out = _typed_polygons(polys, poly_cell, src_starts, src_ends, sectors, obstacle_snap_m)
+    out = _typed_polygons(
+        polys, poly_cell, src_starts, src_ends, sectors, obstacle_snap_m, snap_beside_m
+    )
     cells = [Cell(idxs[k], cell_size, tuple(tp)) for k, tp in out.items() if tp]
     for c, g in zip(cells, _build_regions(cells), strict=True):
         c.__dict__["region"] = g  # fill the cached property in one vectorised pass
@@ -1114,11 +1131,14 @@ def _typed_polygons(
     src_ends: np.ndarray,
     sectors=None,
     obstacle_snap_m: float = 0.0,
+    snap_beside_m: tuple[float, float] = (0.0, 0.0),
 ) -> dict[int, list[TypedPolygon]]:
     """Typed, canonical polygons from oriented shapely polygons, grouped by ``owner``.
 
     Vectors along a source obstacle vector are obstacles (also, with
-    ``obstacle_snap_m`` > 0, frontiers running along one within that distance);
+    ``obstacle_snap_m`` > 0, frontiers running along one within that distance, and with
+    ``snap_beside_m`` = (behind, in front) not zero, frontiers lying beside obstacles
+    within those distances all along);
     ``sectors(a, b, mid, owner, types)`` may then mark sectors; every other vector is a
     frontier.
     """
@@ -1139,6 +1159,18 @@ def _typed_polygons(
             a[front], b[front], mid[front], src_starts, src_ends, obstacle_snap_m, SNAP_ANGLE_DEG
         )
         types[front[near]] = VectorType.OBSTACLE
+    if max(snap_beside_m) > 0:
+        front = np.nonzero(types == VectorType.FRONTIER)[0]
+        beside = _beside_obstacles(
+            a[front],
+            b[front],
+            src_starts,
+            src_ends,
+            max(snap_beside_m[0], MATCH_TOL_M),
+            max(snap_beside_m[1], MATCH_TOL_M),
+            SNAP_ANGLE_DEG,
+        )
+        types[front[beside]] = VectorType.OBSTACLE
     if sectors is not None:
         sectors(a, b, mid, owner[ring_poly[e_ring]], types)
 
@@ -1222,6 +1254,46 @@ def _along_obstacles(
     ok = (L > 0) & (da <= tol) & (db <= tol) & same_dir & (lu > 0)
     hit[np.unique(k[ok])] = True
     return hit
+
+
+def _beside_obstacles(
+    a, b, src_starts, src_ends, behind_m: float, front_m: float, max_angle_deg: float
+) -> np.ndarray:
+    """Vectors a->b every point of which (sampled every ``BESIDE_STEP_M``) lies beside a
+    source obstacle vector running the same way (within ``max_angle_deg``), at most
+    ``behind_m`` behind it (on its unexplored side) or ``front_m`` in front of it. A
+    frontier across a doorway is not: its middle lies beside no wall."""
+    hit = np.zeros(len(a), dtype=bool)
+    if len(src_starts) == 0 or len(a) == 0:
+        return hit
+    u = b - a
+    lu = np.hypot(u[:, 0], u[:, 1])
+    m = np.maximum(1, np.ceil(lu / BESIDE_STEP_M)).astype(int) + 1  # samples, both ends
+    v = np.repeat(np.arange(len(a)), m)
+    first = np.cumsum(m) - m
+    t = (np.arange(len(v)) - np.repeat(first, m)) / (m[v] - 1)
+    pts = a[v] + t[:, None] * u[v]
+    tree = shapely.STRtree(shapely.linestrings(np.stack([src_starts, src_ends], axis=1)))
+    reach = max(behind_m, front_m)
+    k, j = tree.query(shapely.points(pts), predicate="dwithin", distance=reach)
+    d = src_ends[j] - src_starts[j]
+    L = np.hypot(d[:, 0], d[:, 1])
+    n = d / np.where(L > 0, L, 1.0)[:, None]
+    rel = pts[k] - src_starts[j]
+    side = _cross(n, rel)  # > 0: in front of the obstacle (its explored side)
+    along = np.einsum("ij,ij->i", rel, n)
+    same_dir = np.einsum("ij,ij->i", u[v[k]], n) >= np.cos(np.radians(max_angle_deg)) * lu[v[k]]
+    ok = (
+        (L > 0)
+        & (side >= -behind_m)
+        & (side <= front_m)
+        & (along >= -BESIDE_ENDS_M)
+        & (along <= L + BESIDE_ENDS_M)
+        & same_dir
+    )
+    covered = np.zeros(len(pts), dtype=bool)
+    covered[k[ok]] = True
+    return np.logical_and.reduceat(covered, first) & (lu > 0)
 
 
 def _ring_mask(q: np.ndarray, ring: np.ndarray, rule) -> np.ndarray:

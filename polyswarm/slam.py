@@ -96,7 +96,13 @@ class PolySlam:
         self.selector = KeyframeSelector(cfg.keyframe_distance_m, cfg.keyframe_angle_rad)
         self._kf_pose: np.ndarray | None = None  # map-frame pose at the last keyframe
         self._kf_odom: np.ndarray | None = None
-        self.merge_options = MergeOptions(cfg.min_growth_m, cfg.obstacle_snap_m, cfg.notch_fill_m)
+        self.merge_options = MergeOptions(
+            cfg.min_growth_m,
+            cfg.obstacle_snap_m,
+            cfg.notch_fill_m,
+            cfg.obstacle_snap_behind_m,
+            cfg.obstacle_snap_front_m,
+        )
         self.keyframes = 0
         self.degenerate_keyframes = 0
         self.rejected_keyframes = 0

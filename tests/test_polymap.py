@@ -378,3 +378,55 @@ def test_a_geos_error_left_in_the_merge_is_a_geometry_error_and_slam_goes_on(mon
     step = slam.process(room_scan(0.0), (0.0, 0.0, 0.0))  # logged and counted, no crash
     assert step.keyframe and step.delta is None
     assert slam.rejected_keyframes == 1 and slam.map.cells == {}
+
+
+def _right_side(pmap: GridPolyMap, kind: VectorType, x0: float, x1: float) -> float:
+    """Length of ``kind`` vectors running north between x0 and x1."""
+    s, e, _ = pmap.vectors([kind])
+    north = (e[:, 1] - s[:, 1] > 0) & (np.abs(e[:, 0] - s[:, 0]) < 1e-6)
+    inside = (s[:, 0] >= x0) & (s[:, 0] <= x1)
+    return float((e[north & inside, 1] - s[north & inside, 1]).sum())
+
+
+def test_a_frontier_inside_a_wall_seen_head_on_becomes_that_wall_in_either_order():
+    # the wall face runs north at x = 1.0 (explored space on its west side); a grazing
+    # view's frontier chord lies 4 cm inside the wall, along 0.6 m of it
+    head_on = rect(0.2, 0.2, 1.0, 1.0, (O, O, O, O))
+    grazing = rect(0.3, 0.3, 1.04, 0.9, (F, F, F, F))
+    snap = MergeOptions(obstacle_snap_behind_m=0.1)
+    for first, second in ((head_on, grazing), (grazing, head_on)):
+        plain = GridPolyMap(2.0).merge(first).map.merge(second).map
+        assert _right_side(plain, VectorType.FRONTIER, 1.03, 1.05) == pytest.approx(0.6)
+        pmap = GridPolyMap(2.0).merge(first, snap).map.merge(second, snap).map
+        assert _right_side(pmap, VectorType.FRONTIER, 1.03, 1.05) == 0.0
+        assert _right_side(pmap, VectorType.OBSTACLE, 1.03, 1.05) == pytest.approx(0.6)
+        assert_well_formed(pmap)
+    # more than the allowed depth inside: the chord stays a frontier
+    deep = rect(0.3, 0.3, 1.15, 0.9, (F, F, F, F))
+    pmap = GridPolyMap(2.0).merge(head_on, snap).map.merge(deep, snap).map
+    assert _right_side(pmap, VectorType.FRONTIER, 1.14, 1.16) == pytest.approx(0.6)
+
+
+def test_a_frontier_across_a_doorway_in_line_with_the_wall_stays_a_frontier():
+    # wall at x = 1.0 with a 1 m doorway (y 0.5-1.5) seen head-on; a frontier 5 cm
+    # behind the wall's line spans wall and doorway: its middle lies beside no wall
+    xy = [(0.2, 0.2), (1.0, 0.2), (1.0, 0.5), (1.0, 1.5), (1.0, 1.8), (0.2, 1.8)]
+    head_on = TypedPolygon(Ring(xy, [O, O, F, O, O, O]))
+    grazing = rect(0.3, 0.3, 1.05, 1.7, (F, F, F, F))
+    snap = MergeOptions(obstacle_snap_behind_m=0.1)
+    pmap = GridPolyMap(2.0).merge(head_on, snap).map.merge(grazing, snap).map
+    assert _right_side(pmap, VectorType.FRONTIER, 1.04, 1.06) == pytest.approx(1.4)
+
+
+def test_a_frontier_in_front_of_a_wall_whose_growth_is_too_thin_to_keep_becomes_that_wall():
+    # SLAM ignores growth thinner than min_growth_m (lidar noise along walls): a chord
+    # 4 cm in front of a wall seen head-on later can then never close by growing
+    grazing = rect(0.2, 0.2, 0.96, 1.0, (O, F, O, O))
+    head_on = rect(0.5, 0.2, 1.0, 1.0, (O, O, O, F))
+    thin = MergeOptions(min_growth_m=0.05)
+    plain = GridPolyMap(2.0).merge(grazing, thin).map.merge(head_on, thin).map
+    assert _right_side(plain, VectorType.FRONTIER, 0.95, 0.97) == pytest.approx(0.8)
+    snap = MergeOptions(min_growth_m=0.05, obstacle_snap_front_m=0.08)
+    pmap = GridPolyMap(2.0).merge(grazing, snap).map.merge(head_on, snap).map
+    assert _right_side(pmap, VectorType.FRONTIER, 0.95, 0.97) == 0.0
+    assert _right_side(pmap, VectorType.OBSTACLE, 0.95, 0.97) == pytest.approx(0.8)
