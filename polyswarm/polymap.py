@@ -1266,15 +1266,22 @@ def _beside_obstacles(
     hit = np.zeros(len(a), dtype=bool)
     if len(src_starts) == 0 or len(a) == 0:
         return hit
-    u = b - a
-    lu = np.hypot(u[:, 0], u[:, 1])
-    m = np.maximum(1, np.ceil(lu / BESIDE_STEP_M)).astype(int) + 1  # samples, both ends
-    v = np.repeat(np.arange(len(a)), m)
-    first = np.cumsum(m) - m
-    t = (np.arange(len(v)) - np.repeat(first, m)) / (m[v] - 1)
-    pts = a[v] + t[:, None] * u[v]
     tree = shapely.STRtree(shapely.linestrings(np.stack([src_starts, src_ends], axis=1)))
     reach = max(behind_m, front_m)
+    # only vectors with both ends near some obstacle can lie beside obstacles all along
+    ends = shapely.points(np.concatenate([a, b]))
+    near = np.zeros(2 * len(a), dtype=bool)
+    near[tree.query(ends, predicate="dwithin", distance=reach)[0]] = True
+    cand = np.nonzero(near[: len(a)] & near[len(a) :])[0]
+    if len(cand) == 0:
+        return hit
+    u = b[cand] - a[cand]
+    lu = np.hypot(u[:, 0], u[:, 1])
+    m = np.maximum(1, np.ceil(lu / BESIDE_STEP_M)).astype(int) + 1  # samples, both ends
+    v = np.repeat(np.arange(len(cand)), m)
+    first = np.cumsum(m) - m
+    t = (np.arange(len(v)) - np.repeat(first, m)) / (m[v] - 1)
+    pts = a[cand][v] + t[:, None] * u[v]
     k, j = tree.query(shapely.points(pts), predicate="dwithin", distance=reach)
     d = src_ends[j] - src_starts[j]
     L = np.hypot(d[:, 0], d[:, 1])
@@ -1293,7 +1300,8 @@ def _beside_obstacles(
     )
     covered = np.zeros(len(pts), dtype=bool)
     covered[k[ok]] = True
-    return np.logical_and.reduceat(covered, first) & (lu > 0)
+    hit[cand] = np.logical_and.reduceat(covered, first) & (lu > 0)
+    return hit
 
 
 def _ring_mask(q: np.ndarray, ring: np.ndarray, rule) -> np.ndarray:
