@@ -1152,11 +1152,19 @@ def _typed_polygons(
     e_ring = ring_of[:-1][same]
     types = np.full(len(a), VectorType.FRONTIER, dtype=np.uint8)
     mid = 0.5 * (a + b)
-    types[_along_obstacles(a, b, mid, src_starts, src_ends)] = VectorType.OBSTACLE
+    tree = _segment_tree(src_starts, src_ends)  # one index of the sources for every test
+    types[_along_obstacles(a, b, mid, src_starts, src_ends, tree=tree)] = VectorType.OBSTACLE
     if obstacle_snap_m > 0:
         front = np.nonzero(types == VectorType.FRONTIER)[0]
         near = _along_obstacles(
-            a[front], b[front], mid[front], src_starts, src_ends, obstacle_snap_m, SNAP_ANGLE_DEG
+            a[front],
+            b[front],
+            mid[front],
+            src_starts,
+            src_ends,
+            obstacle_snap_m,
+            SNAP_ANGLE_DEG,
+            tree,
         )
         types[front[near]] = VectorType.OBSTACLE
     if max(snap_beside_m) > 0:
@@ -1169,6 +1177,7 @@ def _typed_polygons(
             max(snap_beside_m[0], MATCH_TOL_M),
             max(snap_beside_m[1], MATCH_TOL_M),
             SNAP_ANGLE_DEG,
+            tree,
         )
         types[front[beside]] = VectorType.OBSTACLE
     if sectors is not None:
@@ -1229,15 +1238,29 @@ def _typed_polygons(
     return out
 
 
+def _segment_tree(starts: np.ndarray, ends: np.ndarray) -> shapely.STRtree | None:
+    if len(starts) == 0:
+        return None
+    return shapely.STRtree(shapely.linestrings(np.stack([starts, ends], axis=1)))
+
+
 def _along_obstacles(
-    a, b, mid, src_starts, src_ends, tol: float = MATCH_TOL_M, max_angle_deg: float = 30.0
+    a,
+    b,
+    mid,
+    src_starts,
+    src_ends,
+    tol: float = MATCH_TOL_M,
+    max_angle_deg: float = 30.0,
+    tree: shapely.STRtree | None = None,
 ) -> np.ndarray:
     """Vectors a->b lying along a source obstacle vector (within ``tol``), in the same
-    direction (within ``max_angle_deg``)."""
+    direction (within ``max_angle_deg``). ``tree``: the sources' ``_segment_tree``, if
+    the caller has it."""
     hit = np.zeros(len(a), dtype=bool)
     if len(src_starts) == 0 or len(a) == 0:
         return hit
-    tree = shapely.STRtree(shapely.linestrings(np.stack([src_starts, src_ends], axis=1)))
+    tree = _segment_tree(src_starts, src_ends) if tree is None else tree
     k, j = tree.query(shapely.points(mid), predicate="dwithin", distance=tol)
     if len(k) == 0:
         return hit
@@ -1257,7 +1280,14 @@ def _along_obstacles(
 
 
 def _beside_obstacles(
-    a, b, src_starts, src_ends, behind_m: float, front_m: float, max_angle_deg: float
+    a,
+    b,
+    src_starts,
+    src_ends,
+    behind_m: float,
+    front_m: float,
+    max_angle_deg: float,
+    tree: shapely.STRtree | None = None,
 ) -> np.ndarray:
     """Vectors a->b every point of which (sampled every ``BESIDE_STEP_M``) lies beside a
     source obstacle vector running the same way (within ``max_angle_deg``), at most
@@ -1266,7 +1296,7 @@ def _beside_obstacles(
     hit = np.zeros(len(a), dtype=bool)
     if len(src_starts) == 0 or len(a) == 0:
         return hit
-    tree = shapely.STRtree(shapely.linestrings(np.stack([src_starts, src_ends], axis=1)))
+    tree = _segment_tree(src_starts, src_ends) if tree is None else tree
     reach = max(behind_m, front_m)
     # only vectors with both ends near some obstacle can lie beside obstacles all along
     ends = shapely.points(np.concatenate([a, b]))
