@@ -29,7 +29,8 @@ LOOKAHEAD_STEPS = (1.0, 0.7, 0.45, 0.25)  # fractions of the lookahead tried for
 ESCAPE_MPS = 0.05  # pressed against an obstacle ahead: back off this slowly...
 ESCAPE_TRIGGER_M = 0.02  # ... when something is this much inside the safety margin
 ESCAPE_CHECK_M = 0.15  # ... and the way back is clear for this far
-ESCAPE_TURN_RADPS = 0.5  # blocked with the carrot ahead: turn away from the nearest point
+ESCAPE_TURN_RADPS = 0.5  # blocked with the carrot ahead: turn away from the nearest point...
+ESCAPE_TURN_MAX_RAD = math.pi / 2  # ... by at most this much (then it lies beside the robot)
 INSIDE_SLACK_M = 0.005  # an arc may pass a point inside the margin this much closer than now
 
 
@@ -68,6 +69,7 @@ class PathFollower:
         self.p = params
         self.path: np.ndarray | None = None
         self._progress = 0  # index of the path segment the robot is on
+        self._escape: tuple[float, float] | None = None  # (heading at its start, turn sign)
         vs = np.linspace(0.0, params.max_v_mps, params.v_samples)
         ws = np.linspace(-params.max_w_radps, params.max_w_radps, params.w_samples)
         v, w = np.meshgrid(vs, ws, indexing="ij")
@@ -87,6 +89,7 @@ class PathFollower:
     def set_path(self, points: np.ndarray | None) -> None:
         self.path = None if points is None or len(points) == 0 else np.asarray(points, float)
         self._progress = 0
+        self._escape = None
 
     @property
     def goal(self) -> np.ndarray | None:
@@ -122,11 +125,11 @@ class PathFollower:
             if _segment_clearance(local, obs) >= self.p.radius_m + self.p.safety_margin_m:
                 break
         bearing = math.atan2(local[1], local[0])
-        if abs(bearing) > self.p.turn_in_place_rad:
+        if self._escape is None and abs(bearing) > self.p.turn_in_place_rad:
             w = math.copysign(self.p.max_w_radps, bearing) * min(1.0, abs(bearing))
             return Command(0.0, w, Follow.TURNING)
         extra = np.zeros(len(obs)) if moving is None else np.where(moving, 1.0, 0.0)
-        return self._window(local, bearing, obs, extra)
+        return self._window(local, bearing, obs, extra, float(pose[2]))
 
     def _carrot(self, p: np.ndarray, lookahead_m: float) -> np.ndarray:
         path = self.path
@@ -153,7 +156,12 @@ class PathFollower:
         return path[-1]
 
     def _window(
-        self, carrot: np.ndarray, bearing: float, obstacles: np.ndarray, moving: np.ndarray
+        self,
+        carrot: np.ndarray,
+        bearing: float,
+        obstacles: np.ndarray,
+        moving: np.ndarray,
+        heading: float,
     ) -> Command:
         p = self.p
         reach = p.max_v_mps * p.horizon_s + p.radius_m + p.safety_margin_m + p.dynamic_margin_m
@@ -196,21 +204,31 @@ class PathFollower:
                     + 0.5 * np.minimum(clear - need, 0.3)
                 )
                 k = int(np.argmax(np.where(ok, score, -np.inf)))
+                self._escape = None
                 return Command(float(self._v[k]), float(self._w[k]), Follow.DRIVING)
-        # nothing moving forward is safe: turn (a round robot turning in place touches
-        # nothing) away from the nearest point in front when the carrot lies ahead or on
-        # that point's side (turning towards the carrot there changes nothing: the robot
-        # would wait in front of a corner for ever), else towards the carrot; pressed
-        # against something in front, back away from it; else wait for the way to clear
-        blocker = _nearest_in_front(obstacles, reach)
-        if blocker is not None and (abs(bearing) <= 0.15 or bearing * blocker[1] > 0):
-            w = -math.copysign(ESCAPE_TURN_RADPS, blocker[1])
-            return Command(0.0, w, Follow.BLOCKED)
+        # nothing moving forward is safe. Pressed against something in front: back away
+        # from it. Else turn in place (a round robot turning touches nothing): on with an
+        # escape turn begun before; away from the nearest point in front when the carrot
+        # lies ahead or on that point's side (turning towards the carrot there changes
+        # nothing: a robot waited in front of a corner for ever), until a forward arc is
+        # safe or a quarter turn is done (no turning back and forth between the carrot
+        # and the point); else towards the carrot; else wait for the way to clear
+        if self._can_back_off(obstacles):
+            self._escape = None
+            return Command(-ESCAPE_MPS, 0.0, Follow.BLOCKED)
+        if self._escape is None:
+            blocker = _nearest_in_front(obstacles, reach)
+            if blocker is not None and (abs(bearing) <= 0.15 or bearing * blocker[1] > 0):
+                self._escape = (heading, -math.copysign(1.0, blocker[1]))
+        if self._escape is not None:
+            start, sign = self._escape
+            if abs(wrap(heading - start)) < ESCAPE_TURN_MAX_RAD:
+                return Command(0.0, sign * ESCAPE_TURN_RADPS, Follow.BLOCKED)
+            self._escape = None
+            return Command(0.0, 0.0, Follow.BLOCKED)
         if abs(bearing) > 0.15:
             w = math.copysign(min(p.max_w_radps, 2.0 * abs(bearing)), bearing)
             return Command(0.0, w, Follow.BLOCKED)
-        if self._can_back_off(obstacles):
-            return Command(-ESCAPE_MPS, 0.0, Follow.BLOCKED)
         return Command(0.0, 0.0, Follow.BLOCKED)
 
     def _can_back_off(self, obstacles: np.ndarray) -> bool:
