@@ -108,6 +108,9 @@ class RobotAgent:
                 radius_m=cfg.nav.robot_radius_m,
                 max_v_mps=rc.max_linear_mps,
                 max_w_radps=rc.max_angular_radps,
+                max_accel_mps2=rc.max_linear_accel_mps2,
+                max_angular_accel_radps2=rc.max_angular_accel_radps2,
+                period_s=1.0 / cfg.sim.lidar.rate_hz,
             )
         )
         self.merged: GridPolyMap | None = None
@@ -260,6 +263,7 @@ class RobotAgent:
             if stamp_s >= self._turn_until_s:
                 self._turn_left_rad = 0.0
             out.cmd = (0.0, 0.8 * self.cfg.sim.robot.max_angular_radps)
+        self.follower.sent(*(out.cmd or (0.0, 0.0)))  # arcs start from what the base does
         # 5. state for the coordinator; two robots blocking each other: one gives way
         if self._yield_until is not None:
             self._end_yield(cmd.state, stamp_s)

@@ -55,6 +55,11 @@ class ControlParams:
     turn_in_place_rad: float = 1.0  # carrot farther off the heading: turn first
     v_samples: int = 6
     w_samples: int = 15
+    # the base reaches a commanded velocity at these accelerations (the simulator's): arcs
+    # are rolled out from the velocity the robot has, not from the one it is told
+    max_accel_mps2: float = 1.0
+    max_angular_accel_radps2: float = 3.0
+    period_s: float = 0.1  # one command per scan
 
 
 @dataclass(frozen=True)
@@ -70,21 +75,44 @@ class PathFollower:
         self.path: np.ndarray | None = None
         self._progress = 0  # index of the path segment the robot is on
         self._escape: tuple[float, float] | None = None  # (heading at its start, turn sign)
+        self._velocity = np.zeros(2)  # (v, w) the robot has: see ``sent``
         vs = np.linspace(0.0, params.max_v_mps, params.v_samples)
         ws = np.linspace(-params.max_w_radps, params.max_w_radps, params.w_samples)
         v, w = np.meshgrid(vs, ws, indexing="ij")
         self._v, self._w = v.ravel(), w.ravel()
-        steps = np.linspace(params.horizon_s / 6, params.horizon_s, 6)
-        # rolled-out positions of every candidate (robot frame), (n_cand, n_steps, 2)
-        th = self._w[:, None] * steps[None, :]
-        straight = np.abs(self._w) < 1e-6
-        wsafe = np.where(straight, 1.0, self._w)[:, None]
-        x = np.where(
-            straight[:, None], self._v[:, None] * steps, self._v[:, None] * np.sin(th) / wsafe
+        self._arcs, self._end_heading = self._rollouts(self._velocity)
+
+    def sent(self, v_mps: float, w_radps: float) -> None:
+        """The command sent to the base this period (the caller may have replaced ours):
+        the velocity the robot will have at the next call, given its accelerations."""
+        p = self.p
+        dv = np.array([p.max_accel_mps2, p.max_angular_accel_radps2]) * p.period_s
+        self._velocity = self._velocity + np.clip(
+            np.array([v_mps, w_radps]) - self._velocity, -dv, dv
         )
-        y = np.where(straight[:, None], 0.0, self._v[:, None] * (1 - np.cos(th)) / wsafe)
-        self._arcs = np.stack([x, y], axis=-1)
-        self._end_heading = th[:, -1]
+
+    def _rollouts(self, velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (robot frame) of every candidate over the horizon, (n_cand, 6, 2),
+        and its heading at the end: the base goes from ``velocity`` to the candidate's
+        at its accelerations, then holds it."""
+        p = self.p
+        n = 12
+        dt = p.horizon_s / n
+        t = dt * np.arange(1, n + 1)
+        v = velocity[0] + np.clip(
+            self._v[:, None] - velocity[0], -p.max_accel_mps2 * t, p.max_accel_mps2 * t
+        )
+        w = velocity[1] + np.clip(
+            self._w[:, None] - velocity[1],
+            -p.max_angular_accel_radps2 * t,
+            p.max_angular_accel_radps2 * t,
+        )
+        th = np.cumsum(w * dt, axis=1)
+        mid = th - 0.5 * w * dt  # heading in the middle of each step
+        x = np.cumsum(v * dt * np.cos(mid), axis=1)
+        y = np.cumsum(v * dt * np.sin(mid), axis=1)
+        arcs = np.stack([x, y], axis=-1)[:, 1::2, :]  # every other step: 6 samples
+        return arcs, th[:, -1]
 
     def set_path(self, points: np.ndarray | None) -> None:
         self.path = None if points is None or len(points) == 0 else np.asarray(points, float)
@@ -129,6 +157,7 @@ class PathFollower:
             w = math.copysign(self.p.max_w_radps, bearing) * min(1.0, abs(bearing))
             return Command(0.0, w, Follow.TURNING)
         extra = np.zeros(len(obs)) if moving is None else np.where(moving, 1.0, 0.0)
+        self._arcs, self._end_heading = self._rollouts(self._velocity)
         return self._window(local, bearing, obs, extra, float(pose[2]))
 
     def _carrot(self, p: np.ndarray, lookahead_m: float) -> np.ndarray:
