@@ -1,7 +1,8 @@
 """Local control: follow a planned path while avoiding what the live scan sees.
 
 A dynamic-window controller (Fox, Burgard and Thrun 1997) around a pure-pursuit
-carrot: candidate (v, w) pairs are rolled out for ``horizon_s``; arcs that come closer
+carrot: candidate (v, w) pairs are rolled out for ``horizon_s`` from the velocity the
+base has (it reaches a command at its accelerations); arcs that come closer
 than the robot radius plus a margin to any scan point (walls, other robots, anything
 the map does not know) are refused; the rest are scored by heading towards the carrot,
 speed and clearance. A carrot far to the side turns the robot in place first (a round
@@ -10,6 +11,11 @@ robot turning in place sweeps nothing).
     ctl = PathFollower(ControlParams(radius_m=0.2, max_v_mps=0.5, max_w_radps=1.5))
     ctl.set_path(path_xy)
     cmd = ctl.command(pose, scan_xy_robot_frame)   # Command(v, w, state)
+    ctl.sent(cmd.v_mps, cmd.w_radps)               # what went to the base this period
+
+Blocked with nothing safe ahead, it backs off if pressed against something, else turns
+in place: away from the nearest point in front (for at most a quarter turn) when the
+carrot lies ahead or on that side, else towards the carrot.
 """
 
 from __future__ import annotations
