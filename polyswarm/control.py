@@ -86,7 +86,6 @@ class PathFollower:
         ws = np.linspace(-params.max_w_radps, params.max_w_radps, params.w_samples)
         v, w = np.meshgrid(vs, ws, indexing="ij")
         self._v, self._w = v.ravel(), w.ravel()
-        self._arcs, self._end_heading = self._rollouts(self._velocity)
 
     def sent(self, v_mps: float, w_radps: float) -> None:
         """The command sent to the base this period (the caller may have replaced ours):
@@ -163,7 +162,6 @@ class PathFollower:
             w = math.copysign(self.p.max_w_radps, bearing) * min(1.0, abs(bearing))
             return Command(0.0, w, Follow.TURNING)
         extra = np.zeros(len(obs)) if moving is None else np.where(moving, 1.0, 0.0)
-        self._arcs, self._end_heading = self._rollouts(self._velocity)
         return self._window(local, bearing, obs, extra, float(pose[2]))
 
     def _carrot(self, p: np.ndarray, lookahead_m: float) -> np.ndarray:
@@ -199,18 +197,19 @@ class PathFollower:
         heading: float,
     ) -> Command:
         p = self.p
+        arcs, end_heading = self._rollouts(self._velocity)
         reach = p.max_v_mps * p.horizon_s + p.radius_m + p.safety_margin_m + p.dynamic_margin_m
         near = np.hypot(obstacles[:, 0], obstacles[:, 1]) < reach + 0.5
         obs, moving = obstacles[near], moving[near]
         if len(obs):
-            diff = self._arcs[:, :, None, :] - obs[None, None, :, :]
+            diff = arcs[:, :, None, :] - obs[None, None, :, :]
             dist = np.sqrt((diff**2).sum(-1)).min(axis=1)  # (candidates, points)
         else:
             dist = np.full((len(self._v), 0), np.inf)
         # progress: how much closer the arc's end is to the carrot, and its heading there
-        end = self._arcs[:, -1, :]
+        end = arcs[:, -1, :]
         to_carrot = np.arctan2(carrot[1] - end[:, 1], carrot[0] - end[:, 0])
-        err = np.abs(wrap(to_carrot - self._end_heading))
+        err = np.abs(wrap(to_carrot - end_heading))
         gain = np.hypot(*carrot) - np.hypot(*(carrot - end).T)
         forward = self._v > 0
         now = np.hypot(obs[:, 0], obs[:, 1])  # distance of each point from the robot now
