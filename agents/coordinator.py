@@ -45,9 +45,15 @@ from polyswarm.explore import (
     frontier_targets,
 )
 from polyswarm.navgraph import NavGraph
-from polyswarm.polymap import GridPolyMap, MapDelta, MergeOptions
+from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions
 from protocols.keys import SwarmKeys
-from protocols.mapcodec import decode_delta, decode_map, encode_delta, encode_map
+from protocols.mapcodec import (
+    decode_any_map,
+    decode_delta,
+    decode_merge,
+    encode_delta,
+    encode_map,
+)
 from protocols.messages import (
     Assignment,
     AssignmentKind,
@@ -145,6 +151,9 @@ class Coordinator:
         self.cycle_cpu_ms: list[float] = []  # this thread's processor time of each cycle
         self.now = 0.0
         self.bytes_sent = 0
+        self.replayed_merges = 0  # robot merges replayed on their map copies
+        self.applied_deltas = 0  # robot cell deltas applied to them
+        self.map_fetches = 0  # robot maps fetched whole (a gap, or a merge that differed)
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -242,8 +251,29 @@ class Coordinator:
                 raise _gap(rid, delta)
             info.map = GridPolyMap(delta.cell_size)
         info.map = info.map.apply_delta(delta)
+        self.applied_deltas += 1
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(c.index for c in delta.cells)
+
+    def on_robot_merge(self, rid: str, stamp_s: float, op: MergeOp) -> bytes | None:
+        """Replay a robot's merge on the copy of its map (bit-identical by construction);
+        the changed cells, encoded as a delta (for the journal), or None if it was old.
+
+        Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
+        self.now = max(self.now, stamp_s)
+        info = self.robot(rid)
+        if info.map is None:
+            if op.base_version > 0:
+                raise DeltaGapError(f"first merge of {rid} starts at version {op.base_version}")
+            info.map = GridPolyMap(op.cell_size)
+        res = info.map.replay(op)
+        if not res.changed:
+            return None
+        info.map = res.map
+        self.replayed_merges += 1
+        self._check_behind(info)
+        self._pending.setdefault(rid, set()).update(res.changed)
+        return encode_delta(info.map.delta_since(op.base_version))
 
     def on_robot_map(self, rid: str, pmap: GridPolyMap) -> None:
         """A robot's full map (resync): nothing it mapped is lost."""
@@ -609,13 +639,20 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                             coord.on_status(rid, item.stamp_s, msg)
                         elif isinstance(msg, MapChunk) and item.payload is not None:
                             try:
-                                coord.on_robot_delta(rid, item.stamp_s, decode_delta(item.payload))
+                                if msg.kind == MapKind.MERGE:
+                                    op = decode_merge(item.payload)
+                                    wire = coord.on_robot_merge(rid, item.stamp_s, op)
+                                else:
+                                    wire = item.payload
+                                    delta = decode_delta(wire)
+                                    coord.on_robot_delta(rid, item.stamp_s, delta)
                             except MapError as e:
                                 log.info("resync of %s: %s", rid, e)
                                 resync.add(rid)
                             else:
                                 copy = coord.robot(rid).map
-                                _journal(journal, "robot_delta", rid, item.payload, copy)
+                                if wire is not None:  # a replayed merge is kept as its cells
+                                    _journal(journal, "robot_delta", rid, wire, copy)
                     except DecodeError as e:
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
@@ -623,13 +660,14 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 resync.update(coord.needs_resync())
                 for rid in list(resync):
                     log.info("fetching the full map of %s", rid)
+                    coord.map_fetches += 1
                     got = bus.fetch_map(keys.robot(rid).map, timeout_s=2.0)
                     coord.robot(rid).behind_since = coord.now  # next try after a pause
                     if got is None:
                         continue
                     try:
                         before = coord.robot(rid).map
-                        coord.on_robot_map(rid, decode_map(got[0]))
+                        coord.on_robot_map(rid, decode_any_map(got[0]))
                         resync.discard(rid)
                         if coord.robot(rid).map is not before:
                             _journal(journal, "robot_map", rid, coord.robot(rid).map)
@@ -650,6 +688,12 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         )
         finally:
             bus.close()
+            log.info(
+                "robot map updates: %d merges replayed, %d cell deltas applied, %d map fetches",
+                coord.replayed_merges,
+                coord.applied_deltas,
+                coord.map_fetches,
+            )
             if journal is not None:  # what the robots sent is merged before it is written
                 delta = coord.flush()
                 if delta is not None:

@@ -27,7 +27,7 @@ import numpy as np
 
 from polyswarm.errors import PolyswarmError
 from polyswarm.polymap import GridPolyMap
-from protocols.mapcodec import decode_delta, decode_map, encode_map
+from protocols.mapcodec import decode_any_map, decode_delta, encode_cells_map
 
 log = logging.getLogger(__name__)
 
@@ -52,14 +52,16 @@ def _set_aside(path: Path, why: Exception) -> None:
 
 
 def save_map(path: Path, pmap: GridPolyMap) -> None:
-    _atomic_write(path, encode_map(pmap))
+    """All cells exactly (a restored map is bit-identical, so the coordinator's copy and the
+    robot's map stay the same and merges replay on it)."""
+    _atomic_write(path, encode_cells_map(pmap))
 
 
 def load_map(path: Path) -> GridPolyMap | None:
     if not path.exists():
         return None
     try:
-        return decode_map(path.read_bytes())
+        return decode_any_map(path.read_bytes())  # also a dissolved map of older versions
     except (PolyswarmError, OSError) as e:
         _set_aside(path, e)
         return None

@@ -30,12 +30,19 @@ from polyswarm.control import ControlParams, Follow, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PlanningError, PolyswarmError
 from polyswarm.navgraph import NavGraph, clear_of
 from polyswarm.planner import Planner
-from polyswarm.polymap import GridPolyMap, MapDelta, VectorType
+from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, VectorType
 from polyswarm.scan import LaserScan, scan_to_points
 from polyswarm.se2 import transform_points
 from polyswarm.slam import PolySlam
 from protocols.keys import SwarmKeys, check_name
-from protocols.mapcodec import decode_delta, decode_map, encode_delta, encode_map
+from protocols.mapcodec import (
+    MERGE_TYPE,
+    decode_delta,
+    decode_map,
+    encode_cells_map,
+    encode_delta,
+    encode_update,
+)
 from protocols.messages import (
     Assignment,
     AssignmentKind,
@@ -82,6 +89,7 @@ class Outbox:
     cmd: tuple[float, float] | None = None
     pose: Pose | None = None
     delta: MapDelta | None = None
+    op: MergeOp | None = None  # the delta as the merge that made it (often smaller)
     status: RobotStatus | None = None
 
 
@@ -233,7 +241,7 @@ class RobotAgent:
         if step.keyframe:
             self.stats.keyframes += 1
             self.stats.slam_ms.append(step.timings_ms.get("total", 0.0))
-        out.delta = step.delta
+        out.delta, out.op = step.delta, step.op
         # 3. navigation: replan as the map grows (at the goal, wait for the next order:
         #    a replan there would report the goal reached again and again)
         at_goal = self.state in (RobotState.REACHED, RobotState.HOME)
@@ -517,7 +525,12 @@ def run_agent(
             bus.subscribe(keys.assignment(robot_id), Assignment)
             bus.subscribe(keys.merged_delta, MapChunk)
             bus.subscribe(keys.coordinator_status, CoordinatorStatus)
-            bus.serve_map(me.map, lambda: (encode_map(agent.slam.map), agent.slam.map.version))
+            # all cells exactly: the coordinator's copy must be bit-identical to replay merges
+            bus.serve_map(
+                me.map,
+                lambda: (encode_cells_map(agent.slam.map), agent.slam.map.version),
+                MapKind.DELTA,
+            )
             bus.declare_alive(keys.alive("agent", robot_id))
             bus.watch_alive(keys.all_alive("coordinator"))
             log.info(
@@ -618,10 +631,10 @@ def _send(
     sent = 0
     if out.delta is not None:
         d = out.delta
-        wire = wire if wire is not None else encode_delta(d)
-        sent += bus.publish_map(
-            me.map_delta, MapKind.DELTA, wire, d.base_version, d.version, stamp_s
-        )
+        # the keyframe's merge when it is smaller than the cells it changed
+        what, payload = encode_update(d, out.op, wire)
+        kind = MapKind.MERGE if what == MERGE_TYPE else MapKind.DELTA
+        sent += bus.publish_map(me.map_delta, kind, payload, d.base_version, d.version, stamp_s)
     if out.pose is not None:
         sent += bus.publish(me.pose, out.pose, stamp_s)
     if out.status is not None:

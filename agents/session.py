@@ -239,13 +239,16 @@ class Bus:
             for c in self.map_chunks(kind, payload, base, ver)
         )
 
-    def serve_map(self, key: str, current: Callable[[], tuple[bytes, int]]) -> None:
-        """Answer queries on ``key`` with the full map ``current()`` = (payload, version)."""
+    def serve_map(
+        self, key: str, current: Callable[[], tuple[bytes, int]], kind: MapKind = MapKind.MAP
+    ) -> None:
+        """Answer queries on ``key`` with the full map ``current()`` = (payload, version):
+        a ``polymap`` (``kind`` MAP) or all its cells (DELTA from version -1)."""
 
         def on_query(query: zenoh.Query) -> None:
             try:
                 payload, ver = current()
-                for c in self.map_chunks(MapKind.MAP, payload, -1, ver):
+                for c in self.map_chunks(kind, payload, -1, ver):
                     data = encode(c, self.sender, self.next_seq(key), time.time())
                     query.reply(query.key_expr, data)
                     self.bytes_sent[key] = self.bytes_sent.get(key, 0) + len(data)

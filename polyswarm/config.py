@@ -179,6 +179,11 @@ class SlamConfig:
     # close them. Inside: thinner than walls. In front: more than min_growth_m plus noise
     obstacle_snap_behind_m: float = 0.1
     obstacle_snap_front_m: float = 0.08
+    # keyframe polygons are merged with their vertices on this grid, so that a robot can
+    # send the polygon itself as its map delta, in whole millimetres, and the receiver
+    # replays the merge bit for bit (polymap.MergeOp); 1 mm is far below lidar noise.
+    # 0: not snapped, and deltas go as changed cells
+    merge_quantum_m: float = 0.001
     obstacle_max_gap_m: float = 0.5  # consecutive points farther apart become a frontier...
     obstacle_gap_beams: float = 4.0  # ...unless within this many beam spacings at their range
     icp: IcpConfig = field(default_factory=IcpConfig)
@@ -426,6 +431,11 @@ def validate(cfg: Config) -> None:
     for name in ("obstacle_snap_behind_m", "obstacle_snap_front_m"):
         if not (0.0 <= getattr(cfg.slam, name) <= 0.5):
             raise ConfigError(f"slam.{name} must be 0-0.5 m (0: off)")
+    q = cfg.slam.merge_quantum_m
+    if not (q == 0 or (1e-5 <= q <= 0.05 and abs(q * 1e5 - round(q * 1e5)) < 1e-6)):
+        raise ConfigError(
+            "slam.merge_quantum_m must be 0 (off) or 0.00001-0.05 m in whole 10 um steps"
+        )
     if cfg.explore.strategy not in ("hungarian", "greedy", "nearest"):
         raise ConfigError(
             f"explore.strategy must be hungarian, greedy or nearest, got {cfg.explore.strategy!r}"

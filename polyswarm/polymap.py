@@ -20,10 +20,11 @@ failed merge can never leave a half-updated map behind.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import astuple, dataclass, field
 from enum import IntEnum
 from functools import cached_property
 from types import MappingProxyType
@@ -32,7 +33,13 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon, box
 
-from polyswarm.errors import DeltaGapError, GeometryError, InvalidPolygonError, MapError
+from polyswarm.errors import (
+    DeltaGapError,
+    GeometryError,
+    InvalidPolygonError,
+    MapError,
+    PolyswarmError,
+)
 
 log = logging.getLogger(__name__)
 
@@ -292,6 +299,10 @@ class MergeOptions:
     obstacle_snap_behind_m: float = 0.0
     obstacle_snap_front_m: float = 0.0
 
+    def on_grid(self) -> MergeOptions:
+        """These options in whole 10 um units (``k / UNITS_PER_M``), as a wire carries them."""
+        return MergeOptions(*(round(v * UNITS_PER_M) / UNITS_PER_M for v in astuple(self)))
+
 
 @dataclass(frozen=True)
 class MapDelta:
@@ -307,6 +318,59 @@ class MapDelta:
 class MergeResult:
     map: GridPolyMap
     changed: frozenset[CellIndex]
+
+
+@dataclass(frozen=True)
+class MergeOp:
+    """A map change sent as the operation that made it (a keyframe's delta).
+
+    Merging ``polygon`` with ``options`` into the map at ``base_version`` gave
+    ``version``; ``digest`` (``cells_digest``) hashes the exact geometry of the cells that
+    changed. The merge is a pure function of the map and its inputs, so a bit-identical
+    copy of the map that replays the operation (``GridPolyMap.replay``) gets the same
+    cells, and the digest proves it. One keyframe polygon is 3 to 6 times smaller than
+    the 10-20 cells it changes; the receiver pays the merge's computation instead.
+    """
+
+    cell_size: float
+    base_version: int
+    version: int
+    polygon: TypedPolygon
+    options: MergeOptions
+    digest: int
+
+
+def cells_digest(cells: Iterable[Cell]) -> int:
+    """A 32-bit hash of the cells' exact geometry (indices, rings, types; not versions)."""
+    h = hashlib.blake2b(digest_size=4)
+    for c in sorted(cells, key=lambda c: c.index):
+        h.update(np.array([*c.index, len(c.polygons)], dtype="<i8").tobytes())
+        for p in c.polygons:
+            for r in p.rings():
+                h.update(np.array([len(r.xy)], dtype="<i8").tobytes())
+                h.update(np.ascontiguousarray(r.xy, dtype="<f8").tobytes())
+                h.update(np.asarray(r.types, dtype=np.uint8).tobytes())
+    return int.from_bytes(h.digest(), "little")
+
+
+def snap_polygon(polygon: TypedPolygon, quantum_units: int) -> TypedPolygon | None:
+    """The polygon with every vertex on a grid of ``quantum_units`` 10 um units, as the
+    float ``k / UNITS_PER_M`` of an integer ``k`` (so a receiver decoding ``k`` gets the
+    same float). Vectors that shrink to nothing are dropped; None when the snapped
+    polygon is no longer valid (a sliver that collapsed)."""
+    rings = []
+    for ring in polygon.rings():
+        k = np.rint(ring.xy * (UNITS_PER_M / quantum_units)).astype(np.int64) * quantum_units
+        keep = (k != np.roll(k, -1, axis=0)).any(axis=1)  # vector i has a length
+        if keep.sum() < 3:
+            return None
+        rings.append(Ring(k[keep] / UNITS_PER_M, ring.types[keep]))
+    out = TypedPolygon(rings[0], tuple(rings[1:]))
+    try:
+        out.validate()
+    except InvalidPolygonError:
+        return None
+    return out
 
 
 # ---------------------------------------------------------------------------------------
@@ -600,6 +664,33 @@ class GridPolyMap:
         for c in delta.cells:
             out[c.index] = c
         return GridPolyMap(self.cell_size, out, delta.version)
+
+    def replay(self, op: MergeOp) -> MergeResult:
+        """Apply a ``MergeOp`` by merging its polygon again (this map must be a
+        bit-identical copy of the sender's at ``op.base_version``). An op already applied
+        changes nothing; one that does not apply to this version, fails to merge, or gives
+        other cells than the sender's (``digest``) raises ``DeltaGapError``: fetch the map."""
+        if abs(op.cell_size - self.cell_size) > 1e-9:
+            raise MapError(
+                f"merge cell size {op.cell_size} m does not match the map's {self.cell_size} m"
+            )
+        if op.version <= self.version:
+            return MergeResult(self, frozenset())
+        if op.base_version != self.version:
+            raise DeltaGapError(
+                f"merge applies to version {op.base_version}, map is at {self.version}"
+            )
+        try:
+            res = self.merge(op.polygon, op.options)
+        except PolyswarmError as e:
+            raise DeltaGapError(f"the sender's merge fails here: {e}") from e
+        got = cells_digest(res.map.cells[i] for i in res.changed)
+        if res.map.version != op.version or got != op.digest:
+            raise DeltaGapError(
+                f"replaying merge {op.base_version} -> {op.version} gave other cells than "
+                f"the sender's (digest {got:08x}, sent {op.digest:08x})"
+            )
+        return res
 
     # -- queries ------------------------------------------------------------------------
 

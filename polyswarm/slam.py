@@ -4,6 +4,7 @@
     step = slam.process(scan, odom_pose)
     step.pose                  # (x, y, theta) estimate in the map frame
     step.delta                 # on keyframes: the map cells that changed
+    step.op                    # ...and the merge that changed them (polymap.MergeOp)
     slam.map                   # the robot's GridPolyMap
 
 Only keyframes (moved ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` since
@@ -31,7 +32,16 @@ from polyswarm.errors import PolyswarmError
 from polyswarm.icp import IcpResult, PointToVectorIcp
 from polyswarm.keyframe import keyframe_polygon
 from polyswarm.loopsearch import correlative_search
-from polyswarm.polymap import GridPolyMap, MapDelta, MergeOptions, VectorType
+from polyswarm.polymap import (
+    UNITS_PER_M,
+    GridPolyMap,
+    MapDelta,
+    MergeOp,
+    MergeOptions,
+    VectorType,
+    cells_digest,
+    snap_polygon,
+)
 from polyswarm.posegraph import PoseGraph
 from polyswarm.refine import refine_polygon
 from polyswarm.scan import LaserScan, scan_to_points
@@ -57,6 +67,7 @@ class SlamStep:
     pose: np.ndarray
     keyframe: bool
     delta: MapDelta | None = None
+    op: MergeOp | None = None  # the same change as the merge that made it
     icp: IcpResult | None = None
     refined: str = ""  # "refined", "projected" or "raw" on keyframes
     timings_ms: dict[str, float] = field(default_factory=dict)
@@ -102,7 +113,8 @@ class PolySlam:
             cfg.notch_fill_m,
             cfg.obstacle_snap_behind_m,
             cfg.obstacle_snap_front_m,
-        )
+        ).on_grid()  # whole 10 um units: a receiver of a MergeOp gets the same floats
+        self._quantum_u = round(cfg.merge_quantum_m * UNITS_PER_M)  # 10 um units, 0: off
         self.keyframes = 0
         self.degenerate_keyframes = 0
         self.rejected_keyframes = 0
@@ -180,10 +192,18 @@ class PolySlam:
         # 6. refinement by line fitting (always a valid simple polygon)
         kf, how = refine_polygon(kf, self.cfg.refine)
         t["refine"] = time.perf_counter()
-        # 7. merge into the robot's map; the changed cells are the delta
-        base = self.map.version
+        # 7. merge into the robot's map, its vertices on the wire's grid; the changed cells
+        # are the delta, and the merge itself is a smaller one
+        base, op = self.map.version, None
+        snapped = snap_polygon(kf, self._quantum_u) if self._quantum_u else None
         try:
-            self.map = self.map.merge(kf, self.merge_options).map
+            merged = self.map.merge(kf if snapped is None else snapped, self.merge_options)
+            self.map = merged.map
+            if snapped is not None and merged.changed:
+                digest = cells_digest(merged.map.cells[i] for i in merged.changed)
+                op = MergeOp(
+                    self.map.cell_size, base, self.map.version, snapped, self.merge_options, digest
+                )
         except PolyswarmError as e:  # never silently: counted, logged, pose still tracked
             self.rejected_keyframes += 1
             log.warning("keyframe %d not merged: %s", self.keyframes, e)
@@ -203,7 +223,7 @@ class PolySlam:
             ms[name] = (t[name] - prev) * 1e3
             prev = t[name]
         ms["total"] = (t["merge"] - t["start"]) * 1e3
-        return SlamStep(self.pose.copy(), True, delta, res, how, ms)
+        return SlamStep(self.pose.copy(), True, delta, op, res, how, ms)
 
     # -- stage 4's reference and the pose graph ------------------------------------------
 

@@ -6,6 +6,7 @@ Layout (normative text in ``PROTOCOL.md``)::
                      "q": quantum (units), "ox": int, "oy": int, "polys": bin}
     delta = msgpack {"t": "polymap-delta", "v": 1, "cs": cell size (units), "base": n, "ver": n,
                      "cells": bin}
+    merge = msgpack {"t": "polymap-merge", "v": 1, "b": bin}     (a MergeOp, see below)
 
 A full map carries the explored space as polygons across cell borders (the receiver
 cuts them into cells again; sectors on cell borders are implied). A delta carries the
@@ -22,6 +23,14 @@ changed cells exactly. Both are sequences of unsigned varints::
                                                  mode 2: (d, dy), dy read after all h
            the n-th vector closes the ring; only its type is sent
 
+A merge (a keyframe polygon the receiver merges into its bit-identical copy of the
+sender's map, ``polymap.MergeOp``) is one varint sequence::
+
+    b: cs base ver-base digest q n_opts opts[n_opts] n_rings rings...
+       opts: the MergeOptions in units, in field order; q: the polygon's quantum (units)
+       ring: n zz(x0) zz(y0) h[0..n-2] zz(dy)[0..n-2] type_n-1
+             h = zz(dx) << 2 | type; vertices in units = q * (x, y), absolute
+
 A unit is 10 micrometres (the map's precision grid, so nothing is lost); ``q`` is the
 largest quantum dividing all coordinates (1 unit for SLAM maps, 5,000-20,000 units for
 converted 5-20 cm grid maps), so a typical vector costs one to four bytes.
@@ -32,7 +41,9 @@ builds a new map object, so a bad message never touches an existing map.
 
 from __future__ import annotations
 
+import contextlib
 import math
+from dataclasses import astuple, fields
 
 import msgpack
 import numpy as np
@@ -44,6 +55,8 @@ from polyswarm.polymap import (
     Cell,
     GridPolyMap,
     MapDelta,
+    MergeOp,
+    MergeOptions,
     Ring,
     TypedPolygon,
     VectorType,
@@ -54,7 +67,9 @@ from protocols.varint import decode_varints, encode_varints, unzigzag, zigzag
 FORMAT_VERSION = 1
 MAP_TYPE = "polymap"
 DELTA_TYPE = "polymap-delta"
+MERGE_TYPE = "polymap-merge"
 UNITS_PER_M = POLYMAP_UNITS_PER_M  # wire coordinates are integers of 10 um (PRECISION_M)
+MAX_OPTION_UNITS = UNITS_PER_M  # merge options above 1 m are refused
 MAX_CELL_UNITS = 100 * UNITS_PER_M  # cells larger than 100 m are refused
 MAX_MESSAGE_BYTES = 256 * 1024 * 1024
 
@@ -138,6 +153,47 @@ def encode_delta(delta: MapDelta) -> bytes:
     )
 
 
+def encode_merge(op: MergeOp) -> bytes:
+    """A merge operation; its polygon's vertices must lie on a grid of whole units."""
+    rings = op.polygon.rings()
+    units = [_units(r.xy) for r in rings]
+    for r, u in zip(rings, units, strict=True):
+        if np.abs(u / UNITS_PER_M - r.xy).max() > 0:
+            raise PolyswarmError("merge polygon is not on the 10 um grid (snap_polygon it)")
+    q = max(int(np.gcd.reduce(np.concatenate([u.ravel() for u in units]))), 1)
+    opts = [round(v * UNITS_PER_M) for v in astuple(op.options)]
+    head = [_cell_units(op.cell_size), op.base_version, op.version - op.base_version, op.digest]
+    vals = [np.array([*head, q, len(opts), *opts, len(rings)], dtype=np.int64)]
+    for r, u in zip(rings, units, strict=True):
+        v = u // q
+        d = np.diff(v, axis=0)
+        h = (zigzag(d[:, 0]).astype(np.int64) << 2) | r.types[:-1].astype(np.int64)
+        vals.append(
+            np.concatenate([[len(v)], zigzag(v[0]), h, zigzag(d[:, 1]), [int(r.types[-1])]])
+        )
+    body = encode_varints(np.concatenate(vals).astype(np.uint64))
+    return msgpack.packb({"t": MERGE_TYPE, "v": FORMAT_VERSION, "b": body})
+
+
+def encode_update(
+    delta: MapDelta, op: MergeOp | None, cells: bytes | None = None
+) -> tuple[str, bytes]:
+    """What a robot sends for one map change: the merge when it is the smaller, else the
+    changed cells (``cells``: the delta already encoded). Returns (``MERGE_TYPE`` or
+    ``DELTA_TYPE``, payload)."""
+    cells = encode_delta(delta) if cells is None else cells
+    if op is None:
+        return DELTA_TYPE, cells
+    merge = encode_merge(op)
+    return (MERGE_TYPE, merge) if len(merge) < len(cells) else (DELTA_TYPE, cells)
+
+
+def encode_cells_map(pmap: GridPolyMap) -> bytes:
+    """A whole map as its cells, exactly (a delta from version -1): a copy made from it
+    is bit-identical, so merge operations replay on it. ``encode_map`` is smaller."""
+    return encode_delta(pmap.delta_since(-1))
+
+
 def _cell_units(cell_size: float) -> int:
     units = round(cell_size * UNITS_PER_M)
     if abs(units - cell_size * UNITS_PER_M) > 1e-6 or not (1 <= units <= MAX_CELL_UNITS):
@@ -214,6 +270,69 @@ def decode_delta(data: bytes) -> MapDelta:
     base = _int_field(obj, "base", -1, version)
     cells = _decode_cells(obj.get("cells"), cell_u, version)
     return MapDelta(cell_u / UNITS_PER_M, base, version, tuple(cells))
+
+
+def decode_merge(data: bytes) -> MergeOp:
+    """Decode a merge operation; any defect raises ``DecodeError``."""
+    obj = _unpack(data, MERGE_TYPE)
+    body = obj.get("b")
+    if not isinstance(body, bytes):
+        raise DecodeError("field 'b' must be binary")
+    r = _Reader(decode_varints(body))
+    cell_u = r.one("cell size", 1, MAX_CELL_UNITS)
+    base = r.one("base version", 0, 2**62)
+    version = base + r.one("version step", 1, 2**62)
+    digest = r.one("digest", 0, 2**32 - 1)
+    q = r.one("quantum", 1, cell_u)
+    n_opts = len(fields(MergeOptions))
+    r.one("option count", n_opts, n_opts)
+    opts = [r.one("merge option", 0, MAX_OPTION_UNITS) / UNITS_PER_M for _ in range(n_opts)]
+    n_rings = r.one("ring count", 1, len(r.vals))
+    rings = []
+    for k in range(n_rings):
+        n = r.one("vertex count", 3, len(r.vals))
+        x0, y0 = unzigzag(r.take(2, "first vertex"))
+        h = r.take(n - 1, "vectors").astype(np.int64)
+        dy = unzigzag(r.take(n - 1, "y steps"))
+        last = r.one("closing vector type", 0, int(VectorType.SECTOR))
+        ty = h & 3
+        if (ty > VectorType.SECTOR).any():
+            raise DecodeError(f"ring {k}: unknown vector type")
+        dx = unzigzag((h >> 2).astype(np.uint64))
+        steps = np.stack([dx, dy], axis=1)
+        v = np.vstack([[x0, y0], np.array([x0, y0]) + np.cumsum(steps, axis=0)])
+        if np.abs(v).max() * q > 2**40:
+            raise DecodeError(f"ring {k}: vertex too far from the origin")
+        rings.append(Ring(v * q / UNITS_PER_M, np.append(ty, last).astype(np.uint8)))
+    if r.pos != len(r.vals):
+        raise DecodeError(f"{len(r.vals) - r.pos} trailing values after the last ring")
+    poly = TypedPolygon(rings[0], tuple(rings[1:]))
+    try:
+        poly.validate()
+    except PolyswarmError as e:
+        raise DecodeError(f"merge polygon: {e}") from None
+    return MergeOp(cell_u / UNITS_PER_M, base, version, poly, MergeOptions(*opts), digest)
+
+
+def decode_any_map(data: bytes) -> GridPolyMap:
+    """A whole map sent as a ``polymap`` or as all its cells (``encode_cells_map``)."""
+    if _type_of(data) != DELTA_TYPE:
+        return decode_map(data)  # which says what is wrong with anything else
+    delta = decode_delta(data)
+    if delta.base_version != -1:
+        raise DecodeError(f"a whole map must be a delta from version -1, not {delta.base_version}")
+    try:
+        return GridPolyMap(delta.cell_size).apply_delta(delta)
+    except PolyswarmError as e:
+        raise DecodeError(f"map cannot be rebuilt: {e}") from None
+
+
+def _type_of(data) -> object:
+    if isinstance(data, bytes | bytearray | memoryview) and len(data) <= MAX_MESSAGE_BYTES:
+        with contextlib.suppress(Exception):  # garbage: the real decoder says what is wrong
+            obj = msgpack.unpackb(bytes(data), raw=False)
+            return obj.get("t") if isinstance(obj, dict) else None
+    return None
 
 
 class _Reader:

@@ -62,6 +62,7 @@ class MissionState(StrEnum):
 
 class MapKind(StrEnum):
     DELTA = "delta"  # a polymap-delta (PROTOCOL.md 3.3)
+    MERGE = "merge"  # a polymap-merge (3.4): the keyframe polygon that changed the map
     MAP = "map"  # a full polymap (3.2), the reply of a map queryable
 
 

@@ -12,10 +12,22 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from polyswarm.errors import DecodeError
-from polyswarm.polymap import UNITS_PER_M, GridPolyMap
-from protocols.golden.make_golden import describe_polygons, golden_maps
-from protocols.mapcodec import decode_delta, decode_map, encode_delta, encode_map
+from polyswarm.errors import DecodeError, PolyswarmError
+from polyswarm.polymap import UNITS_PER_M, GridPolyMap, MergeOp, MergeOptions, snap_polygon
+from protocols.golden.make_golden import describe_polygons, golden_maps, golden_merge
+from protocols.mapcodec import (
+    DELTA_TYPE,
+    MERGE_TYPE,
+    decode_any_map,
+    decode_delta,
+    decode_map,
+    decode_merge,
+    encode_cells_map,
+    encode_delta,
+    encode_map,
+    encode_merge,
+    encode_update,
+)
 from protocols.varint import decode_varints, encode_varints, unzigzag, zigzag
 from tests.conftest import F, O, rect, star
 
@@ -86,6 +98,62 @@ def test_encoder_reproduces_the_golden_bytes():
     assert encode_delta(b.delta_since(a.version)) == (GOLDEN / "delta_v1.bin").read_bytes()
 
 
+def test_merge_round_trip_and_replay_give_the_senders_cells():
+    a, op = golden_merge()
+    back = decode_merge(encode_merge(op))
+    assert (back.base_version, back.version, back.digest) == (
+        op.base_version,
+        op.version,
+        op.digest,
+    )
+    assert back.options == op.options and back.cell_size == op.cell_size
+    assert np.array_equal(back.polygon.shell.xy, op.polygon.shell.xy)
+    assert np.array_equal(back.polygon.shell.types, op.polygon.shell.types)
+    want = a.merge(op.polygon, op.options).map
+    got = a.replay(back).map
+    assert all(got.cells[k].same_content(want.cells[k]) for k in want.cells)
+
+
+def test_golden_merge_vector():
+    _, op = golden_merge()
+    assert encode_merge(op) == (GOLDEN / "merge_v1.bin").read_bytes()
+    m = json.loads((GOLDEN / "merge_v1.json").read_text())
+    back = decode_merge((GOLDEN / "merge_v1.bin").read_bytes())
+    assert [back.base_version, back.version, back.digest] == [
+        m["base_version"],
+        m["version"],
+        m["digest"],
+    ]
+    assert describe_polygons([back.polygon])[0] == m["polygon"]
+
+
+def test_a_robot_sends_the_smaller_of_merge_and_cells():
+    a = sample_map()
+    kf = snap_polygon(star((1.0, 0.5), np.full(40, 2.5), np.zeros(40, dtype=np.uint8)), 100)
+    res = a.merge(kf)
+    delta = res.map.delta_since(a.version)
+    op = MergeOp(2.0, a.version, res.map.version, kf, MergeOptions(), 0)
+    what, payload = encode_update(delta, op)
+    merge, cells = encode_merge(op), encode_delta(delta)
+    assert (what, payload) == (
+        (MERGE_TYPE, merge) if len(merge) < len(cells) else (DELTA_TYPE, cells)
+    )
+    assert encode_update(delta, None) == (DELTA_TYPE, cells)
+    with pytest.raises(PolyswarmError, match="10 um grid"):  # never an inexact polygon
+        encode_merge(MergeOp(2.0, 0, 1, star((0, 0), np.full(5, 1.0), [O] * 5), MergeOptions(), 0))
+
+
+def test_a_whole_map_as_its_cells_decodes_bit_identical():
+    pmap = sample_map()
+    back = decode_any_map(encode_cells_map(pmap))
+    assert back.version == pmap.version and set(back.cells) == set(pmap.cells)
+    assert all(back.cells[k].same_content(pmap.cells[k]) for k in pmap.cells)
+    assert decode_any_map(encode_map(pmap)).explored_area() == pytest.approx(pmap.explored_area())
+    part = encode_delta(pmap.delta_since(1))
+    with pytest.raises(DecodeError, match="version -1"):
+        decode_any_map(part)
+
+
 # --- hostile input ---------------------------------------------------------------------
 
 
@@ -93,6 +161,8 @@ def test_every_truncation_raises_decode_error_only():
     for blob, decode in (
         ((GOLDEN / "map_v1.bin").read_bytes(), decode_map),
         ((GOLDEN / "delta_v1.bin").read_bytes(), decode_delta),
+        ((GOLDEN / "merge_v1.bin").read_bytes(), decode_merge),
+        ((GOLDEN / "delta_v1.bin").read_bytes(), decode_any_map),
     ):
         for n in range(len(blob)):
             with pytest.raises(DecodeError):
@@ -101,17 +171,18 @@ def test_every_truncation_raises_decode_error_only():
 
 @given(st.binary(max_size=300))
 def test_random_bytes_raise_decode_error_only(data):
-    for decode in (decode_map, decode_delta):
+    for decode in (decode_map, decode_delta, decode_merge, decode_any_map):
         with contextlib.suppress(DecodeError):
             decode(data)
 
 
 @given(st.integers(0, 10_000), st.integers(0, 255))
 def test_flipped_bytes_never_crash(pos, value):
-    blob = bytearray((GOLDEN / "delta_v1.bin").read_bytes())
-    blob[pos % len(blob)] = value
-    with contextlib.suppress(DecodeError):
-        decode_delta(bytes(blob))
+    for name, decode in (("delta_v1.bin", decode_delta), ("merge_v1.bin", decode_merge)):
+        blob = bytearray((GOLDEN / name).read_bytes())
+        blob[pos % len(blob)] = value
+        with contextlib.suppress(DecodeError):
+            decode(bytes(blob))
 
 
 def _delta_with_body(body: bytes, **fields) -> bytes:

@@ -9,9 +9,19 @@ import pytest
 
 from agents.coordinator import END_CONFIRM_CYCLES, EXCLUDE_S, REACHED_GRACE_S, Coordinator
 from polyswarm.config import Config
+from polyswarm.errors import DeltaGapError
 from polyswarm.explore import Strategy, assign
-from polyswarm.polymap import GridPolyMap, VectorType
-from protocols.mapcodec import decode_delta, encode_delta
+from polyswarm.polymap import GridPolyMap, MergeOp, MergeOptions, VectorType, cells_digest
+from protocols.mapcodec import (
+    decode_any_map,
+    decode_delta,
+    decode_map,
+    decode_merge,
+    encode_cells_map,
+    encode_delta,
+    encode_map,
+    encode_merge,
+)
 from protocols.messages import (
     Assignment,
     AssignmentKind,
@@ -258,6 +268,39 @@ def test_a_delta_gap_is_refused_and_a_full_map_resyncs():
     c.on_robot_map("r1", later)
     c.cycle()
     assert c.merged.explored_area() == pytest.approx(later.explored_area(), rel=1e-6)
+
+
+def test_robot_merges_replay_on_its_copy_and_a_mismatch_resyncs_from_exact_cells():
+    """A robot sends keyframes as merges: the coordinator replays them on its copy. A
+    copy that is not bit-identical (here: made from the dissolved full map, which cuts
+    cells afresh) fails the digest and is replaced by the robot's exact cells."""
+    opts = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
+
+    def op_of(pmap, poly):
+        res = pmap.merge(poly, opts)
+        digest = cells_digest(res.map.cells[i] for i in res.changed)
+        return res.map, MergeOp(2.0, pmap.version, res.map.version, poly, opts, digest)
+
+    c = coordinator(1)
+    robot, op = op_of(GridPolyMap(2.0), rect(-0.5, -0.5, 3.3, 0.7, (O, F, O, F)))
+    assert c.on_robot_merge("r1", 0.1, decode_merge(encode_merge(op))) is not None
+    robot, op = op_of(robot, rect(3.0, -0.5, 5.1, 0.7, (O, F, O, O)))
+    wire = c.on_robot_merge("r1", 0.2, op)
+    assert decode_delta(wire).version == robot.version  # journaled as its cells
+    assert c.on_robot_merge("r1", 0.3, op) is None  # a duplicate changes nothing
+    c.flush()
+    assert c.merged.explored_area() == pytest.approx(robot.explored_area(), rel=1e-6)
+    # the copy is replaced by the dissolved map: same space, other cuts
+    c.on_robot_map("r2", decode_map(encode_map(robot)))
+    later, op = op_of(robot, rect(1.0, 0.6, 1.8, 3.3, (O, O, O, F)))
+    try:
+        c.on_robot_merge("r2", 0.4, op)
+    except DeltaGapError:  # the coordinator fetches the robot's map: its exact cells
+        c.on_robot_map("r2", decode_any_map(encode_cells_map(robot)))
+        c.on_robot_merge("r2", 0.5, op)
+    copy = c.robot("r2").map
+    assert copy.version == later.version
+    assert cells_digest(copy.cells.values()) == cells_digest(later.cells.values())
 
 
 def test_a_restored_coordinator_merges_what_it_had_applied_but_not_merged():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -48,3 +49,11 @@ def test_launch_two_robots_explores_rooms_to_95_percent(tmp_path):
         assert len([ln for ln in lines if ln and not ln.startswith("#")]) > 10
     for name in ("coordinator", "sim", "r1", "r2"):
         assert (out / "logs" / f"{name}.log").exists()
+    # the robots sent most keyframes as merges, and the coordinator replayed every one
+    # bit for bit (a replay that differed would have made it fetch the robot's map)
+    text = " ".join((out / "logs" / "coordinator.log").read_text().split())  # unwrapped
+    m = re.search(r"(\d+) merges replayed, (\d+) cell deltas applied, (\d+) map fetches", text)
+    assert m is not None, text[-2000:]
+    merges, deltas, fetches = map(int, m.groups())
+    assert merges > deltas and fetches == 0
+    assert "other cells than the sender" not in text

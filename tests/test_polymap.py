@@ -14,11 +14,15 @@ from polyswarm.errors import DeltaGapError, InvalidPolygonError, MapError
 from polyswarm.polymap import (
     PRECISION_M,
     SLIVER_M,
+    UNITS_PER_M,
     GridPolyMap,
+    MergeOp,
     MergeOptions,
     Ring,
     TypedPolygon,
     VectorType,
+    cells_digest,
+    snap_polygon,
 )
 from tests.conftest import F, O, rect, star
 
@@ -430,3 +434,71 @@ def test_a_frontier_in_front_of_a_wall_whose_growth_is_too_thin_to_keep_becomes_
     pmap = GridPolyMap(2.0).merge(grazing, snap).map.merge(head_on, snap).map
     assert _right_side(pmap, VectorType.FRONTIER, 0.95, 0.97) == 0.0
     assert _right_side(pmap, VectorType.OBSTACLE, 0.95, 0.97) == pytest.approx(0.8)
+
+
+# --- merge operations (a keyframe's delta sent as the polygon it merged) ---------------
+
+SLAM_OPTIONS = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
+
+
+def _op(pmap: GridPolyMap, polygon: TypedPolygon, options=SLAM_OPTIONS):
+    res = pmap.merge(polygon, options)
+    digest = cells_digest(res.map.cells[i] for i in res.changed)
+    return res.map, MergeOp(pmap.cell_size, pmap.version, res.map.version, polygon, options, digest)
+
+
+def test_snap_polygon_puts_vertices_on_the_grid_and_drops_vectors_that_vanish():
+    p = TypedPolygon(
+        Ring([(0, 0), (1.00004, 0.0), (1.0001, 0.0003), (1, 1), (0, 1)], [O, F, O, O, F])
+    )
+    s = snap_polygon(p, 100)  # 1 mm
+    assert s is not None
+    k = s.shell.xy * UNITS_PER_M
+    assert np.array_equal(k, np.rint(k)) and not (np.rint(k).astype(int) % 100).any()
+    # (1.00004, 0) and (1.0001, 0.0003) both land on (1.000, 0.000): that vector is gone,
+    # and the vector leaving the merged vertex keeps its type (obstacle)
+    assert len(s.shell.xy) == 4
+    assert s.shell.types.tolist() == [O, O, O, F]
+    sliver = TypedPolygon(Ring([(0, 0), (1, 0), (0.5, 0.0004)], [O, O, O]))
+    assert snap_polygon(sliver, 100) is None  # collapsed to a line
+
+
+@given(st.integers(0, 2**31 - 1))
+def test_replaying_merges_reproduces_the_senders_map_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    sender = copy = GridPolyMap(2.0)
+    for _ in range(6):
+        kf = star(rng.uniform(-3, 3, 2), rng.uniform(0.4, 2.5, 20), rng.integers(0, 2, 20))
+        kf = snap_polygon(kf, 100)
+        if kf is None:
+            continue
+        new, op = _op(sender, kf)
+        if new.version == sender.version:
+            continue
+        sender = new
+        copy = copy.replay(op).map
+    assert copy.version == sender.version and set(copy.cells) == set(sender.cells)
+    for i, c in sender.cells.items():
+        assert cells_digest([c]) == cells_digest([copy.cells[i]])
+        assert copy.cells[i].version == c.version
+
+
+def test_replay_refuses_a_gap_a_wrong_result_and_ignores_an_old_op():
+    a = GridPolyMap(2.0).merge(rect(0, 0, 3, 1)).map
+    b, op = _op(a, rect(2.5, 0.2, 5, 0.8, (O, F, O, F)))
+    assert a.replay(op).map.version == b.version
+    assert b.replay(op).changed == frozenset()  # already applied: unchanged
+    with pytest.raises(DeltaGapError, match="applies to version"):
+        GridPolyMap(2.0).replay(op)  # the copy is behind: fetch the map
+    with pytest.raises(DeltaGapError, match="other cells"):
+        a.replay(MergeOp(2.0, op.base_version, op.version, op.polygon, op.options, op.digest ^ 1))
+    # a copy at the right version that is not bit-identical is caught by the digest
+    other = GridPolyMap(2.0).merge(rect(0, 0, 3, 1.001)).map
+    assert other.version == op.base_version
+    with pytest.raises(DeltaGapError, match="other cells"):
+        other.replay(op)
+
+
+def test_merge_options_on_the_grid_are_whole_units():
+    o = MergeOptions(0.05, 0.123456789, 0.0, 0.1, 0.08).on_grid()
+    assert o.obstacle_snap_m == 12346 / UNITS_PER_M and o.min_growth_m == 0.05

@@ -7,8 +7,10 @@ import pytest
 
 from polyswarm.config import Config
 from polyswarm.evaluation import map_iou
+from polyswarm.polymap import GridPolyMap, cells_digest
 from polyswarm.runners.slam import metrics, run_world
 from polyswarm.slam import KeyframeSelector, PolySlam
+from protocols.mapcodec import decode_merge, encode_merge
 from sim import Simulation, load_world
 
 
@@ -35,6 +37,13 @@ def test_only_keyframes_carry_deltas():
     assert all(s.delta is None for s in steps if not s.keyframe)
     versions = [s.delta.version for s in kf if s.delta]
     assert versions == sorted(versions)
+    # every change is also a merge operation that a receiver replays to the same map
+    copy = GridPolyMap(cfg.map.cell_size_m)
+    for s in kf:
+        if s.delta is not None:
+            assert s.op is not None and s.op.version == s.delta.version
+            copy = copy.replay(decode_merge(encode_merge(s.op))).map
+    assert cells_digest(copy.cells.values()) == cells_digest(slam.map.cells.values())
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,10 @@ The same noisy scans and SLAM poses go into PolySLAM and into a log-odds 5 cm gr
 (``polyswarm.gridmap``, ray casting; never ground truth). At every keyframe, where
 PolySLAM emits a map delta, each scheme's message for that update is measured:
 
-* ``polymap_delta`` / ``polymap_delta_zlib``: the robot's PolyMap delta (wire codec);
+* ``polymap_delta`` / ``polymap_delta_zlib``: what the robot agent sends for the change:
+  the keyframe's merge (``polymap-merge``, replayed by the receiver) when it is smaller
+  than the changed cells, else the cells (``polymap-delta``);
+* ``polymap_cells``: the changed cells alone, as sent before merges were (for comparison);
 * ``grid_full`` / ``_zlib`` / ``_png``: the whole nav_msgs/OccupancyGrid (CDR);
 * ``grid_update`` / ``_zlib`` / ``_png``: a map_msgs/OccupancyGridUpdate of the bounding
   box of the cells whose value changed (CDR).
@@ -20,6 +23,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import time
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,13 +32,15 @@ from pathlib import Path
 import numpy as np
 
 from polyswarm.config import Config
+from polyswarm.errors import DeltaGapError
 from polyswarm.gridmap import LogOddsGrid
-from polyswarm.polymap import GridPolyMap, MapDelta
+from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, cells_digest
 from polyswarm.scan import LaserScan
 
 SCHEMES = (
     "polymap_delta",
     "polymap_delta_zlib",
+    "polymap_cells",
     "grid_full",
     "grid_full_zlib",
     "grid_full_png",
@@ -55,24 +61,76 @@ class Keyframe:
     pose: np.ndarray
     delta_bytes: int
     delta_zlib_bytes: int
+    cells_bytes: int
 
 
 @dataclass
 class Recording:
-    """Keyframes of one run and the final PolyMap of each robot."""
+    """Keyframes of one run and the final PolyMap of each robot.
+
+    Every update is also decoded and applied to a receiver's copy of the robot's map, as
+    the coordinator does: a merge is replayed (timed: the receiver's cost of the smaller
+    messages) and must give the sender's cells bit for bit."""
 
     name: str
     keyframes: list[Keyframe] = field(default_factory=list)
     maps: dict[str, GridPolyMap] = field(default_factory=dict)
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
     free_range_m: float = 3.0
+    copies: dict[str, GridPolyMap] = field(default_factory=dict)
+    replay_ms: list[float] = field(default_factory=list)
+    replay_failures: int = 0
 
-    def add(self, robot: str, t_s: float, scan: LaserScan, pose, delta: MapDelta) -> None:
-        from protocols.mapcodec import encode_delta
+    def add(
+        self,
+        robot: str,
+        t_s: float,
+        scan: LaserScan,
+        pose,
+        delta: MapDelta,
+        op: MergeOp | None = None,
+    ) -> None:
+        from protocols.mapcodec import (
+            MERGE_TYPE,
+            decode_delta,
+            decode_merge,
+            encode_delta,
+            encode_update,
+        )
 
-        raw = encode_delta(delta)
+        cells = encode_delta(delta)
+        what, raw = encode_update(delta, op, cells)
+        copy = self.copies.get(robot) or GridPolyMap(delta.cell_size)
+        if what == MERGE_TYPE:
+            t0 = time.perf_counter()
+            try:
+                copy = copy.replay(decode_merge(raw)).map
+            except DeltaGapError:  # the coordinator would fetch the map: take the cells
+                self.replay_failures += 1
+                copy = copy.apply_delta(decode_delta(cells))
+            self.replay_ms.append((time.perf_counter() - t0) * 1e3)
+        else:
+            copy = copy.apply_delta(decode_delta(raw))
+        self.copies[robot] = copy
         self.keyframes.append(
-            Keyframe(robot, t_s, scan, np.asarray(pose, float), len(raw), len(zlib.compress(raw)))
+            Keyframe(
+                robot,
+                t_s,
+                scan,
+                np.asarray(pose, float),
+                len(raw),
+                len(zlib.compress(raw)),
+                len(cells),
+            )
+        )
+
+    def copies_identical(self) -> bool:
+        """Does every receiver's copy equal its robot's final map, cell for cell?"""
+        return all(
+            r in self.copies
+            and set(m.cells) == set(self.copies[r].cells)
+            and cells_digest(m.cells.values()) == cells_digest(self.copies[r].cells.values())
+            for r, m in self.maps.items()
         )
 
 
@@ -131,6 +189,7 @@ def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) 
             "robot": kf.robot,
             "polymap_delta": kf.delta_bytes,
             "polymap_delta_zlib": kf.delta_zlib_bytes,
+            "polymap_cells": kf.cells_bytes,
             "grid_full": len(full_raw),
             "grid_full_zlib": len(zlib.compress(full_raw)),
             "grid_full_png": png_bytes(full),
@@ -170,6 +229,12 @@ def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) 
             "grid_png": grid_png,
         },
         "map_bytes_ratio_vs_png": poly_map / grid_png,
+        "cells_bytes_ratio_vs_best_grid": cumulative["polymap_cells"] / cumulative[best_grid],
+        "merges_sent": len(rec.replay_ms),
+        "merges_not_replayed": rec.replay_failures,
+        "receiver_copies_identical": rec.copies_identical(),
+        "replay_ms_median": float(np.median(rec.replay_ms)) if rec.replay_ms else None,
+        "replay_ms_p95": float(np.percentile(rec.replay_ms, 95)) if rec.replay_ms else None,
         "known_area_m2": known,
         "bytes_per_m2": {s: cumulative[s] / max(known, 1e-9) for s in SCHEMES},
         "rows": rows,
@@ -198,7 +263,7 @@ def record_log(path: Path, cfg: Config, seed: int = 0) -> Recording:
     for k, s in enumerate(log.scans):
         step = slam.process(s.scan, odom[k])
         if step.delta is not None:
-            rec.add("r1", float(s.stamp), s.scan, step.pose, step.delta)
+            rec.add("r1", float(s.stamp), s.scan, step.pose, step.delta, step.op)
     rec.maps["r1"] = slam.map
     return rec
 

@@ -13,11 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyswarm.config import Config, RobotEntry
-from polyswarm.polymap import MapDelta
+from polyswarm.polymap import MapDelta, MergeOp
 from polyswarm.scan import LaserScan
 
-# (robot id, simulated time s, scan, SLAM pose (x, y, theta), the robot's map delta)
-KeyframeHook = Callable[[str, float, LaserScan, np.ndarray, MapDelta], None]
+# (robot id, simulated time s, scan, SLAM pose (x, y, theta), the robot's map delta, and
+# the same change as the merge that made it, or None)
+KeyframeHook = Callable[[str, float, LaserScan, np.ndarray, MapDelta, MergeOp | None], None]
 
 
 @dataclass
@@ -45,7 +46,7 @@ def explore_in_process(
 
     from agents.coordinator import Coordinator
     from agents.robot import RobotAgent
-    from protocols.mapcodec import decode_delta, encode_delta
+    from protocols.mapcodec import MERGE_TYPE, decode_delta, decode_merge, encode_update
     from protocols.messages import MissionState, Odometry
     from sim import Simulation, load_world, spread_start_poses
 
@@ -74,12 +75,15 @@ def explore_in_process(
                 out = a.on_scan(sim.time, ev.scan)
                 if out.cmd:
                     sim.set_cmd(ev.robot, *out.cmd)
-                if out.delta is not None:
-                    wire = encode_delta(out.delta)
+                if out.delta is not None:  # what the agent sends: the merge or the cells
+                    what, wire = encode_update(out.delta, out.op)
                     delta_bytes += len(wire)
-                    coord.on_robot_delta(a.id, sim.time, decode_delta(wire))
+                    if what == MERGE_TYPE:
+                        coord.on_robot_merge(a.id, sim.time, decode_merge(wire))
+                    else:
+                        coord.on_robot_delta(a.id, sim.time, decode_delta(wire))
                     if on_keyframe is not None:
-                        on_keyframe(a.id, sim.time, ev.scan, a.pose.copy(), out.delta)
+                        on_keyframe(a.id, sim.time, ev.scan, a.pose.copy(), out.delta, out.op)
                 if out.pose is not None:
                     coord.on_pose(a.id, sim.time, out.pose)
                     for b in agents:

@@ -395,6 +395,15 @@ def bench_bandwidth(
             f"{r['map_bytes_ratio_vs_png']:.2f}",
         )
     Console().print(t)
+    for r in results:
+        if r["merges_sent"]:
+            console.print(
+                f"{r['name']}: {r['merges_sent']} of {r['keyframes']} updates sent as merges, "
+                f"{r['merges_sent'] - r['merges_not_replayed']} replayed bit for bit by the "
+                f"receiver (median {r['replay_ms_median']:.1f} ms, "
+                f"p95 {r['replay_ms_p95']:.1f} ms); "
+                f"receiver's copy identical at the end: {r['receiver_copies_identical']}"
+            )
     console.print(f"CSV files and plots in {out}")
 
 

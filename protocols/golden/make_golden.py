@@ -9,12 +9,22 @@ in integer wire units (10 um), so another implementation can check itself agains
 from __future__ import annotations
 
 import json
+from dataclasses import astuple
 from pathlib import Path
 
 import numpy as np
 
-from polyswarm.polymap import UNITS_PER_M, GridPolyMap, Ring, TypedPolygon, VectorType
-from protocols.mapcodec import encode_delta, encode_map
+from polyswarm.polymap import (
+    UNITS_PER_M,
+    GridPolyMap,
+    MergeOp,
+    MergeOptions,
+    Ring,
+    TypedPolygon,
+    VectorType,
+    cells_digest,
+)
+from protocols.mapcodec import encode_delta, encode_map, encode_merge
 
 HERE = Path(__file__).parent
 O, F = VectorType.OBSTACLE, VectorType.FRONTIER
@@ -30,6 +40,16 @@ def golden_maps() -> tuple[GridPolyMap, GridPolyMap]:
     a = GridPolyMap(2.0).merge(room).map
     b = a.merge(corridor).map
     return a, b
+
+
+def golden_merge() -> tuple[GridPolyMap, MergeOp]:
+    """The corridor of ``golden_maps`` sent as a merge into the room, with SLAM's options."""
+    a, _ = golden_maps()
+    corridor = TypedPolygon(Ring([(3.4, 1.0), (6.0, 1.0), (6.0, 1.6), (3.4, 1.6)], [O, F, O, F]))
+    options = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
+    res = a.merge(corridor, options)
+    digest = cells_digest(res.map.cells[i] for i in res.changed)
+    return a, MergeOp(2.0, a.version, res.map.version, corridor, options, digest)
 
 
 def units(xy: np.ndarray) -> list[list[int]]:
@@ -119,6 +139,24 @@ def main() -> None:
                     }
                     for c in sorted(delta.cells, key=lambda c: c.index)
                 ],
+            },
+            indent=1,
+        )
+    )
+
+    _, op = golden_merge()
+    (HERE / "merge_v1.bin").write_bytes(encode_merge(op))
+    (HERE / "merge_v1.json").write_text(
+        json.dumps(
+            {
+                "type": "polymap-merge",
+                "format_version": 1,
+                "cell_size_units": 200000,
+                "base_version": op.base_version,
+                "version": op.version,
+                "digest": op.digest,
+                "options_units": [round(v * UNITS_PER_M) for v in astuple(op.options)],
+                "polygon": describe_polygons([op.polygon])[0],
             },
             indent=1,
         )
