@@ -615,7 +615,11 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
             bus.subscribe(keys.all_robots("map/delta"), MapChunk)
             bus.subscribe(keys.all_robots("pose"), Pose)
             bus.subscribe(keys.all_robots("status"), RobotStatus)
-            bus.serve_map(keys.merged_map, lambda: (encode_map(coord.merged), coord.merged.version))
+            precision_m = cfg.map.whole_map_precision_m  # a whole map goes at 1 mm
+            bus.serve_map(
+                keys.merged_map,
+                lambda: (encode_map(coord.merged, precision_m), coord.merged.version),
+            )
             bus.declare_alive(keys.alive("coordinator", "coordinator"))
             bus.watch_alive(keys.all_alive("agent"))
             resync: set[str] = set()

@@ -34,6 +34,10 @@ class MapConfig:
     # Side of the square cells the map is stored on; also the unit of a delta. 2 m was
     # chosen by `polyswarm bench cells` (merge cost against delta bytes, see README).
     cell_size_m: float = 2.0
+    # Whole maps that are shared or saved (the coordinator's map replies, .polymap files)
+    # have their vertices rounded to this grid: a third smaller than the map's own 10 um
+    # (`polyswarm bench bandwidth`), and 50 times finer than a 5 cm occupancy grid
+    whole_map_precision_m: float = 0.001
 
 
 @dataclass(frozen=True)
@@ -431,6 +435,9 @@ def validate(cfg: Config) -> None:
     for name in ("obstacle_snap_behind_m", "obstacle_snap_front_m"):
         if not (0.0 <= getattr(cfg.slam, name) <= 0.5):
             raise ConfigError(f"slam.{name} must be 0-0.5 m (0: off)")
+    wp = cfg.map.whole_map_precision_m
+    if not (1e-5 <= wp <= 0.01 and abs(wp * 1e5 - round(wp * 1e5)) < 1e-6):
+        raise ConfigError("map.whole_map_precision_m must be 0.00001-0.01 m in whole 10 um steps")
     q = cfg.slam.merge_quantum_m
     if not (q == 0 or (1e-5 <= q <= 0.05 and abs(q * 1e5 - round(q * 1e5)) < 1e-6)):
         raise ConfigError(

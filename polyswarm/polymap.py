@@ -440,15 +440,20 @@ class GridPolyMap:
         cells = {k: c.with_version(version) for k, c in merged.cells.items()}
         return cls(cell_size, cells, version)
 
-    def dissolve(self) -> list[TypedPolygon]:
-        """The explored space as polygons across cell borders (border sectors vanish)."""
+    def dissolve(self, precision_m: float = PRECISION_M) -> list[TypedPolygon]:
+        """The explored space as polygons across cell borders (border sectors vanish),
+        every vertex on a grid of ``precision_m`` (GEOS snap rounding: the result stays
+        valid). Coarser than the map's 10 um, a vector moved by the rounding keeps its
+        obstacle type when it runs along an obstacle within 1.5 grid steps."""
         regions = [c.region for c in self.cells.values() if c.polygons]
         if not regions:
             return []
-        union = shapely.union_all(np.array(regions, dtype=object), grid_size=PRECISION_M)
+        precision_m = max(precision_m, PRECISION_M)
+        union = shapely.union_all(np.array(regions, dtype=object), grid_size=precision_m)
         polys, owner = _polygon_parts(np.array([union], dtype=object))
         s, e, _ = self.vectors([VectorType.OBSTACLE])
-        return _typed_polygons(polys, owner, s, e).get(0, [])
+        snap = 1.5 * precision_m if precision_m > PRECISION_M else 0.0
+        return _typed_polygons(polys, owner, s, e, obstacle_snap_m=snap).get(0, [])
 
     def _merge_geometry(
         self,

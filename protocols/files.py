@@ -5,14 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from polyswarm.errors import DataFormatError, DecodeError
-from polyswarm.polymap import GridPolyMap
+from polyswarm.polymap import PRECISION_M, GridPolyMap
 from protocols.mapcodec import decode_map, encode_map
 
 SUFFIX = ".polymap"
 
 
-def write_polymap(pmap: GridPolyMap, path: str | Path) -> int:
-    data = encode_map(pmap)
+def write_polymap(pmap: GridPolyMap, path: str | Path, precision_m: float = PRECISION_M) -> int:
+    """Write the map (vertices rounded to ``precision_m``); returns the bytes written."""
+    data = encode_map(pmap, precision_m)
     Path(path).write_bytes(data)
     return len(data)
 

@@ -13,7 +13,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from polyswarm.errors import DecodeError, PolyswarmError
-from polyswarm.polymap import UNITS_PER_M, GridPolyMap, MergeOp, MergeOptions, snap_polygon
+from polyswarm.polymap import (
+    UNITS_PER_M,
+    GridPolyMap,
+    MergeOp,
+    MergeOptions,
+    VectorType,
+    snap_polygon,
+)
 from protocols.golden.make_golden import describe_polygons, golden_maps, golden_merge
 from protocols.mapcodec import (
     DELTA_TYPE,
@@ -62,6 +69,23 @@ def test_full_map_round_trip_keeps_explored_space():
         assert s0 == 0 or back.vector_counts()[kind] > 0
     pts = np.random.default_rng(1).uniform(-8, 8, (2000, 2))
     assert np.array_equal(back.is_free_many(pts), pmap.is_free_many(pts))
+
+
+def test_a_whole_map_at_1_mm_is_smaller_and_keeps_space_and_walls():
+    pmap = sample_map()
+    exact, coarse = encode_map(pmap), encode_map(pmap, 0.001)
+    assert len(coarse) < 0.8 * len(exact)
+    assert msgpack.unpackb(coarse)["q"] % 100 == 0  # every vertex on the millimetre grid
+    back = decode_map(coarse)
+    assert back.explored_area() == pytest.approx(pmap.explored_area(), rel=1e-4)
+
+    def obstacle_length(m):
+        s, e, _ = m.vectors([VectorType.OBSTACLE])
+        return float(np.hypot(*(e - s).T).sum())
+
+    assert obstacle_length(back) == pytest.approx(obstacle_length(pmap), rel=0.01)
+    pts = np.random.default_rng(2).uniform(-8, 8, (2000, 2))
+    assert (back.is_free_many(pts) != pmap.is_free_many(pts)).sum() <= 2  # within 1 mm
 
 
 def test_delta_round_trip_is_exact():

@@ -77,6 +77,7 @@ class Recording:
     maps: dict[str, GridPolyMap] = field(default_factory=dict)
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
     free_range_m: float = 3.0
+    map_precision_m: float = 0.001  # whole maps are encoded at this grid (the config's)
     copies: dict[str, GridPolyMap] = field(default_factory=dict)
     replay_ms: list[float] = field(default_factory=list)
     replay_failures: int = 0
@@ -208,8 +209,9 @@ def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) 
             progress(n + 1, len(rec.keyframes))
     cumulative = {s: int(sum(r[s] for r in rows)) for s in SCHEMES}
     best_grid = min(GRID_DELTA_SCHEMES, key=lambda s: cumulative[s])
-    poly_map = sum(len(encode_map(m)) for m in rec.maps.values())
-    poly_map_zlib = sum(len(zlib.compress(encode_map(m))) for m in rec.maps.values())
+    encoded = [encode_map(m, rec.map_precision_m) for m in rec.maps.values()]
+    poly_map = sum(len(b) for b in encoded)
+    poly_map_zlib = sum(len(zlib.compress(b)) for b in encoded)
     grid_png = sum(png_bytes(g.trinary()) for g in grids.values())
     known = sum(g.known_area_m2() for g in grids.values())
     return {
@@ -259,6 +261,7 @@ def record_log(path: Path, cfg: Config, seed: int = 0) -> Recording:
         Path(path).name.split(".")[0],
         mount=(m.x_m, m.y_m, m.yaw_rad),
         free_range_m=cfg.slam.frontier_range_m,
+        map_precision_m=cfg.map.whole_map_precision_m,
     )
     for k, s in enumerate(log.scans):
         step = slam.process(s.scan, odom[k])
@@ -277,6 +280,7 @@ def record_simulation(world: str, robots: int, sim_s: float, seed: int, cfg: Con
         f"sim-{world.replace(':', '_')}-{robots}",
         mount=(m.x_m, m.y_m, m.yaw_rad),
         free_range_m=cfg.slam.frontier_range_m,
+        map_precision_m=cfg.map.whole_map_precision_m,
     )
     run = explore_in_process(world, robots, sim_s, seed, cfg, on_keyframe=rec.add)
     rec.maps = {a.id: a.slam.map for a in run.agents}

@@ -120,7 +120,7 @@ def agent_cmd(
         from protocols.files import write_polymap
 
         out.parent.mkdir(parents=True, exist_ok=True)
-        write_polymap(agent.slam.map, out)
+        write_polymap(agent.slam.map, out, cfg.map.whole_map_precision_m)
         export_map(agent.slam.map, out.with_suffix(".svg"))
         export_map(agent.slam.map, out.with_suffix(".png"))
     s = agent.stats

@@ -477,7 +477,7 @@ def launch(
     m["crashed_processes"] = sorted(crashed)
     m["stopped_because"] = error or "unknown"
     m["config"] = config_to_dict(cfg)["explore"]
-    _write_outputs(out, obs, m)
+    _write_outputs(out, obs, m, cfg.map.whole_map_precision_m)
     return LaunchResult(out, m, obs.merged)
 
 
@@ -554,12 +554,12 @@ def _final_sync(bus, keys, obs: Observer) -> None:
         obs.coverage.append((obs.sim_t, obs.coverage_now()))
 
 
-def _write_outputs(out: Path, obs: Observer, m: dict) -> None:
+def _write_outputs(out: Path, obs: Observer, m: dict, precision_m: float) -> None:
     from polyswarm.io.export import export_map
     from polyswarm.io.tum import write_tum
     from protocols.files import write_polymap
 
-    m["merged_map_bytes"] = write_polymap(obs.merged, out / "map.polymap")
+    m["merged_map_bytes"] = write_polymap(obs.merged, out / "map.polymap", precision_m)
     trajs = [np.array(v.truth)[:, 1:3] for v in obs.robots.values() if len(v.truth) > 1]
     export_map(obs.merged, out / "map.svg", trajectories=trajs)
     export_map(obs.merged, out / "map.png", trajectories=trajs)

@@ -235,7 +235,7 @@ def write_outputs(run: SlamRun, out: str | Path, cfg: Config) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     m = metrics(run)
-    write_polymap(run.map, out / "map.polymap")
+    write_polymap(run.map, out / "map.polymap", cfg.map.whole_map_precision_m)
     export_map(run.map, out / "map.svg", trajectories=[run.estimate[:, :2]])
     export_map(run.map, out / "map.png", trajectories=[run.estimate[:, :2]])
     write_tum(out / "trajectory.tum", run.stamps, run.estimate)
