@@ -31,9 +31,10 @@ sender's map, ``polymap.MergeOp``) is one varint sequence::
        ring: n zz(x0) zz(y0) h[0..n-2] zz(dy)[0..n-2] type_n-1
              h = zz(dx) << 2 | type; vertices in units = q * (x, y), absolute
 
-A unit is 10 micrometres (the map's precision grid, so nothing is lost); ``q`` is the
-largest quantum dividing all coordinates (1 unit for SLAM maps, 5,000-20,000 units for
-converted 5-20 cm grid maps), so a typical vector costs one to four bytes.
+A unit is 10 micrometres (the map's precision grid, so deltas lose nothing); ``q`` is the
+largest quantum dividing all coordinates (100 units for whole maps shared at 1 mm and for
+merges, 1 unit for cells, 5,000-20,000 units for converted 5-20 cm grid maps), so a
+typical vector costs one to four bytes.
 
 Decoding untrusted bytes raises ``DecodeError`` (and nothing else) on any defect, and
 builds a new map object, so a bad message never touches an existing map.
