@@ -255,9 +255,9 @@ class Coordinator:
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(c.index for c in delta.cells)
 
-    def on_robot_merge(self, rid: str, stamp_s: float, op: MergeOp) -> bytes | None:
+    def on_robot_merge(self, rid: str, stamp_s: float, op: MergeOp) -> MapDelta | None:
         """Replay a robot's merge on the copy of its map (bit-identical by construction);
-        the changed cells, encoded as a delta (for the journal), or None if it was old.
+        the cells it changed as a delta (for the journal), or None if it was old.
 
         Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
         self.now = max(self.now, stamp_s)
@@ -273,7 +273,8 @@ class Coordinator:
         self.replayed_merges += 1
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(res.changed)
-        return encode_delta(info.map.delta_since(op.base_version))
+        changed = tuple(res.map.cells[i] for i in sorted(res.changed))
+        return MapDelta(op.cell_size, op.base_version, op.version, changed)
 
     def on_robot_map(self, rid: str, pmap: GridPolyMap) -> None:
         """A robot's full map (resync): nothing it mapped is lost."""
@@ -643,19 +644,22 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                             coord.on_status(rid, item.stamp_s, msg)
                         elif isinstance(msg, MapChunk) and item.payload is not None:
                             try:
+                                wire = item.payload
                                 if msg.kind == MapKind.MERGE:
-                                    op = decode_merge(item.payload)
-                                    wire = coord.on_robot_merge(rid, item.stamp_s, op)
+                                    op = decode_merge(wire)
+                                    replayed = coord.on_robot_merge(rid, item.stamp_s, op)
+                                    # journaled as the cells it changed (restores need no merge)
+                                    wire = None
+                                    if replayed is not None and journal is not None:
+                                        wire = encode_delta(replayed)
                                 else:
-                                    wire = item.payload
-                                    delta = decode_delta(wire)
-                                    coord.on_robot_delta(rid, item.stamp_s, delta)
+                                    coord.on_robot_delta(rid, item.stamp_s, decode_delta(wire))
                             except MapError as e:
                                 log.info("resync of %s: %s", rid, e)
                                 resync.add(rid)
                             else:
-                                copy = coord.robot(rid).map
-                                if wire is not None:  # a replayed merge is kept as its cells
+                                if wire is not None:
+                                    copy = coord.robot(rid).map
                                     _journal(journal, "robot_delta", rid, wire, copy)
                     except DecodeError as e:
                         log.warning("rejected %s: %s", item.key, e)

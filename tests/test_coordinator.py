@@ -285,8 +285,11 @@ def test_robot_merges_replay_on_its_copy_and_a_mismatch_resyncs_from_exact_cells
     robot, op = op_of(GridPolyMap(2.0), rect(-0.5, -0.5, 3.3, 0.7, (O, F, O, F)))
     assert c.on_robot_merge("r1", 0.1, decode_merge(encode_merge(op))) is not None
     robot, op = op_of(robot, rect(3.0, -0.5, 5.1, 0.7, (O, F, O, O)))
-    wire = c.on_robot_merge("r1", 0.2, op)
-    assert decode_delta(wire).version == robot.version  # journaled as its cells
+    delta = c.on_robot_merge("r1", 0.2, op)
+    assert delta.version == robot.version  # journaled as the cells it changed
+    assert {x.index for x in delta.cells} == {
+        i for i, x in robot.cells.items() if x.version == robot.version
+    }
     assert c.on_robot_merge("r1", 0.3, op) is None  # a duplicate changes nothing
     c.flush()
     assert c.merged.explored_area() == pytest.approx(robot.explored_area(), rel=1e-6)
