@@ -152,6 +152,7 @@ class Coordinator:
         self.now = 0.0
         self.bytes_sent = 0
         self.replayed_merges = 0  # robot merges replayed on their map copies
+        self.replay_cpu_ms: list[float] = []  # this thread's processor time of each replay
         self.applied_deltas = 0  # robot cell deltas applied to them
         self.map_fetches = 0  # robot maps fetched whole (a gap, or a merge that differed)
 
@@ -266,7 +267,9 @@ class Coordinator:
             if op.base_version > 0:
                 raise DeltaGapError(f"first merge of {rid} starts at version {op.base_version}")
             info.map = GridPolyMap(op.cell_size)
+        c0 = time.thread_time()
         res = info.map.replay(op)
+        self.replay_cpu_ms.append((time.thread_time() - c0) * 1e3)
         if not res.changed:
             return None
         info.map = res.map
@@ -702,6 +705,14 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 coord.applied_deltas,
                 coord.map_fetches,
             )
+            if coord.replay_cpu_ms:
+                r = np.asarray(coord.replay_cpu_ms)
+                log.info(
+                    "merge replays: processor time p50 %.1f ms, p95 %.1f ms, %.1f s in all",
+                    np.median(r),
+                    np.percentile(r, 95),
+                    r.sum() / 1e3,
+                )
             if journal is not None:  # what the robots sent is merged before it is written
                 delta = coord.flush()
                 if delta is not None:

@@ -546,6 +546,8 @@ def run_agent(
             behind_since = None  # the merged map we hold is older than the coordinator's
             while not stop.is_set() and time.monotonic() < t_end:
                 for item in bus.poll(timeout_s=0.05):
+                    if stop.is_set():  # a backlog of scans must not outlast the shutdown grace
+                        break
                     alive = is_alive_change(item)
                     if alive is not None:
                         need_merged |= alive
