@@ -7,7 +7,10 @@ Zenoh together; heavy imports happen inside the commands. Known errors
 
 from __future__ import annotations
 
+import contextlib
+import faulthandler
 import logging
+import signal
 import sys
 
 import typer
@@ -47,6 +50,10 @@ def _root(
 ) -> None:
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     setup_logging(level)
+    # SIGUSR1 writes every thread's stack to stderr, even while Python waits in C code:
+    # `launch` sends it to a child that did not stop in time, before killing it
+    with contextlib.suppress(AttributeError, ValueError, RuntimeError):  # no SIGUSR1 here
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
 
 
 def setup_logging(level: int) -> None:

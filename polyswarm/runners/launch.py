@@ -12,6 +12,7 @@ folder. The observer never talks to the robots: it only listens.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -48,6 +49,7 @@ from protocols.messages import (
 
 log = logging.getLogger(__name__)
 
+STACK_DUMP_S = 0.2  # a child that did not stop gets this long to write its stack
 SHUTDOWN_S = 4.0  # children get this long to exit after SIGTERM before SIGKILL
 HUB = ("coordinator", "router")  # stopped last, so they receive what the robots sent last
 HUB_SHUTDOWN_S = 1.5  # ... and given this much of SHUTDOWN_S (writing the coordinator's
@@ -361,7 +363,10 @@ def _stop_children(children: list[Child]) -> dict[str, int | None]:
             try:
                 c.proc.wait(timeout=max(0.0, until - time.monotonic()))
             except subprocess.TimeoutExpired:
-                log.warning("%s did not stop in time: killed", c.name)
+                log.warning("%s did not stop in time: killed (its stack is in its log)", c.name)
+                with contextlib.suppress(OSError):
+                    c.proc.send_signal(signal.SIGUSR1)  # faulthandler: where it was stuck
+                    time.sleep(STACK_DUMP_S)
                 c.proc.kill()
                 c.proc.wait()
     return {c.name: c.proc.returncode for c in children}
