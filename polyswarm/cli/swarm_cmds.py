@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from polyswarm.cli import app
+from polyswarm.cli import app, exit_now
 from polyswarm.errors import ConfigError
 
 CONFIG_OPT = typer.Option(None, "--config", "-c", help="TOML config file.")
@@ -129,6 +129,7 @@ def agent_cmd(
         f"{agent.bytes_sent} bytes sent",
         err=True,
     )
+    exit_now()  # state saved, session closed: no slow teardown
 
 
 @app.command("coordinator")
@@ -162,6 +163,7 @@ def coordinator_cmd(
         f"{coord.bytes_sent} bytes sent",
         err=True,
     )
+    exit_now()  # state saved, session closed: no slow teardown
 
 
 @app.command("launch")
