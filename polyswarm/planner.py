@@ -178,6 +178,13 @@ class Planner:
         ]
         st, en, _ = self.map.vectors(BOUNDARY, cells)
         r_out = grown_radius(r)  # circumscribed: never closer than r
+        if len(st):  # only walls whose grown shape can reach the sleeve: a long diagonal
+            # path's box holds most of the map, and growing all of it was one GEOS call of
+            # seconds on a loaded machine (an agent killed in it at shutdown)
+            shapely.prepare(sleeve)
+            lines = shapely.linestrings(np.stack([st, en], axis=1))
+            near = shapely.dwithin(sleeve, lines, r_out + 1e-3)
+            st, en = st[near], en[near]
         free = sleeve
         if len(st):
             grown = shapely.buffer(
