@@ -71,6 +71,8 @@ DELTA_TYPE = "polymap-delta"
 MERGE_TYPE = "polymap-merge"
 UNITS_PER_M = POLYMAP_UNITS_PER_M  # wire coordinates are integers of 10 um (PRECISION_M)
 MAX_OPTION_UNITS = UNITS_PER_M  # merge options above 1 m are refused
+MAX_COORD_UNITS = 2**40  # about 11,000 km: coordinates and steps beyond are refused
+MAX_MERGE_VERTICES = 2**20  # per ring of a merge (a keyframe has hundreds)
 MAX_CELL_UNITS = 100 * UNITS_PER_M  # cells larger than 100 m are refused
 MAX_MESSAGE_BYTES = 256 * 1024 * 1024
 
@@ -294,18 +296,21 @@ def decode_merge(data: bytes) -> MergeOp:
     n_rings = r.one("ring count", 1, len(r.vals))
     rings = []
     for k in range(n_rings):
-        n = r.one("vertex count", 3, len(r.vals))
+        n = r.one("vertex count", 3, min(len(r.vals), MAX_MERGE_VERTICES))
         x0, y0 = unzigzag(r.take(2, "first vertex"))
-        h = r.take(n - 1, "vectors").astype(np.int64)
+        h = r.take(n - 1, "vectors").astype(np.uint64)
         dy = unzigzag(r.take(n - 1, "y steps"))
         last = r.one("closing vector type", 0, int(VectorType.SECTOR))
-        ty = h & 3
+        ty = (h & np.uint64(3)).astype(np.int64)
         if (ty > VectorType.SECTOR).any():
             raise DecodeError(f"ring {k}: unknown vector type")
-        dx = unzigzag((h >> 2).astype(np.uint64))
+        dx = unzigzag(h >> np.uint64(2))
         steps = np.stack([dx, dy], axis=1)
+        # bounded before summing, so that no int64 overflows (2**20 steps of 2**40)
+        if max(abs(int(x0)), abs(int(y0)), int(np.abs(steps).max())) > MAX_COORD_UNITS // q:
+            raise DecodeError(f"ring {k}: vertex or step too far")
         v = np.vstack([[x0, y0], np.array([x0, y0]) + np.cumsum(steps, axis=0)])
-        if np.abs(v).max() * q > 2**40:
+        if int(np.abs(v).max()) > MAX_COORD_UNITS // q:
             raise DecodeError(f"ring {k}: vertex too far from the origin")
         rings.append(Ring(v * q / UNITS_PER_M, np.append(ty, last).astype(np.uint8)))
     if r.pos != len(r.vals):

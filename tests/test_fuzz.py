@@ -8,7 +8,16 @@ from polyswarm.benchmarks import fuzz
 
 def test_no_decoder_lets_anything_but_its_error_escape():
     res = fuzz.run(count=2000, seed=1)
-    assert set(res) == {"message", "map", "delta", "ros-laserscan", "ros-odometry", "ros-twist"}
+    assert set(res) == {
+        "message",
+        "map",
+        "delta",
+        "merge",
+        "whole map as cells",
+        "ros-laserscan",
+        "ros-odometry",
+        "ros-twist",
+    }
     for name, r in res.items():
         assert r["crashes"] == 0, (name, r["examples"])
         assert r["rejected"] > 0 and r["accepted"] + r["rejected"] == r["inputs"]

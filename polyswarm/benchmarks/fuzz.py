@@ -43,7 +43,7 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
     from polyswarm.scan import LaserScan
     from protocols import ros
     from protocols.golden.make_golden import golden_messages
-    from protocols.mapcodec import decode_delta, decode_map
+    from protocols.mapcodec import decode_any_map, decode_delta, decode_map, decode_merge
     from protocols.messages import decode, encode
 
     golden = Path(__file__).resolve().parents[2] / "protocols" / "golden"
@@ -52,6 +52,8 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
         "message": (decode, [encode(m, "r1", 7, 12.5) for _, m in golden_messages()]),
         "map": (decode_map, [(golden / "map_v1.bin").read_bytes()]),
         "delta": (decode_delta, [(golden / "delta_v1.bin").read_bytes()]),
+        "merge": (decode_merge, [(golden / "merge_v1.bin").read_bytes()]),
+        "whole map as cells": (decode_any_map, [(golden / "delta_v1.bin").read_bytes()]),
         "ros-laserscan": (ros.decode_laserscan, [ros.encode_laserscan(scan)]),
         "ros-odometry": (ros.decode_odometry, [ros.encode_odometry(1.0, (1.0, 2.0, 0.5))]),
         "ros-twist": (ros.decode_twist, [ros.encode_twist(0.2, -0.4)]),
