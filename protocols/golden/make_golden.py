@@ -108,59 +108,44 @@ def main() -> None:
         out[name] = {"hex": encode(msg, "r1", 7, 12.5).hex(), "body": body}
     (HERE / "messages_v1.json").write_text(json.dumps(out, indent=1))
     a, b = golden_maps()
-    (HERE / "map_v1.bin").write_bytes(encode_map(b))
-    (HERE / "map_v1.json").write_text(
-        json.dumps(
-            {
-                "type": "polymap",
-                "format_version": 1,
-                "cell_size_units": 200000,
-                "version": b.version,
-                "polygons": describe_polygons(b.dissolve()),
-            },
-            indent=1,
-        )
+    _write(
+        "map_v1",
+        encode_map(b),
+        "polymap",
+        version=b.version,
+        polygons=describe_polygons(b.dissolve()),
     )
     delta = b.delta_since(a.version)
-    (HERE / "delta_v1.bin").write_bytes(encode_delta(delta))
-    (HERE / "delta_v1.json").write_text(
-        json.dumps(
-            {
-                "type": "polymap-delta",
-                "format_version": 1,
-                "cell_size_units": 200000,
-                "base_version": delta.base_version,
-                "version": delta.version,
-                "cells": [
-                    {
-                        "index": list(c.index),
-                        "version": c.version,
-                        "polygons": describe_polygons(c.polygons),
-                    }
-                    for c in sorted(delta.cells, key=lambda c: c.index)
-                ],
-            },
-            indent=1,
-        )
+    cells = [
+        {"index": list(c.index), "version": c.version, "polygons": describe_polygons(c.polygons)}
+        for c in sorted(delta.cells, key=lambda c: c.index)
+    ]
+    _write(
+        "delta_v1",
+        encode_delta(delta),
+        "polymap-delta",
+        base_version=delta.base_version,
+        version=delta.version,
+        cells=cells,
+    )
+    _, op = golden_merge()
+    _write(
+        "merge_v1",
+        encode_merge(op),
+        "polymap-merge",
+        base_version=op.base_version,
+        version=op.version,
+        digest=op.digest,
+        options_units=[round(v * UNITS_PER_M) for v in astuple(op.options)],
+        polygon=describe_polygons([op.polygon])[0],
     )
 
-    _, op = golden_merge()
-    (HERE / "merge_v1.bin").write_bytes(encode_merge(op))
-    (HERE / "merge_v1.json").write_text(
-        json.dumps(
-            {
-                "type": "polymap-merge",
-                "format_version": 1,
-                "cell_size_units": 200000,
-                "base_version": op.base_version,
-                "version": op.version,
-                "digest": op.digest,
-                "options_units": [round(v * UNITS_PER_M) for v in astuple(op.options)],
-                "polygon": describe_polygons([op.polygon])[0],
-            },
-            indent=1,
-        )
-    )
+
+def _write(name: str, data: bytes, kind: str, **fields) -> None:
+    """``NAME.bin`` and ``NAME.json``: what the message must decode to (2 m cells)."""
+    (HERE / f"{name}.bin").write_bytes(data)
+    head = {"type": kind, "format_version": 1, "cell_size_units": 200000}
+    (HERE / f"{name}.json").write_text(json.dumps({**head, **fields}, indent=1))
 
 
 if __name__ == "__main__":
