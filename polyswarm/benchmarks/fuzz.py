@@ -42,8 +42,14 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
     """Decoder and valid seeds per kind of outside data."""
     from polyswarm.scan import LaserScan
     from protocols import ros
-    from protocols.golden.make_golden import golden_messages
-    from protocols.mapcodec import decode_any_map, decode_delta, decode_map, decode_merge
+    from protocols.golden.make_golden import golden_maps, golden_messages
+    from protocols.mapcodec import (
+        decode_any_map,
+        decode_delta,
+        decode_map,
+        decode_merge,
+        encode_cells_map,
+    )
     from protocols.messages import decode, encode
 
     golden = Path(__file__).resolve().parents[2] / "protocols" / "golden"
@@ -53,7 +59,7 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
         "map": (decode_map, [(golden / "map_v1.bin").read_bytes()]),
         "delta": (decode_delta, [(golden / "delta_v1.bin").read_bytes()]),
         "merge": (decode_merge, [(golden / "merge_v1.bin").read_bytes()]),
-        "whole map as cells": (decode_any_map, [(golden / "delta_v1.bin").read_bytes()]),
+        "whole map as cells": (decode_any_map, [encode_cells_map(golden_maps()[1])]),
         "ros-laserscan": (ros.decode_laserscan, [ros.encode_laserscan(scan)]),
         "ros-odometry": (ros.decode_odometry, [ros.encode_odometry(1.0, (1.0, 2.0, 0.5))]),
         "ros-twist": (ros.decode_twist, [ros.encode_twist(0.2, -0.4)]),
