@@ -15,11 +15,9 @@ from polyswarm.polymap import GridPolyMap, MergeOp, MergeOptions, VectorType, ce
 from protocols.mapcodec import (
     decode_any_map,
     decode_delta,
-    decode_map,
     decode_merge,
     encode_cells_map,
     encode_delta,
-    encode_map,
     encode_merge,
 )
 from protocols.messages import (
@@ -272,8 +270,8 @@ def test_a_delta_gap_is_refused_and_a_full_map_resyncs():
 
 def test_robot_merges_replay_on_its_copy_and_a_mismatch_resyncs_from_exact_cells():
     """A robot sends keyframes as merges: the coordinator replays them on its copy. A
-    copy that is not bit-identical (here: made from the dissolved full map, which cuts
-    cells afresh) fails the digest and is replaced by the robot's exact cells."""
+    copy that is not bit-identical fails the digest, is left as it was, and is replaced
+    by the robot's exact cells, on which the next merge replays."""
     opts = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
 
     def op_of(pmap, poly):
@@ -293,17 +291,23 @@ def test_robot_merges_replay_on_its_copy_and_a_mismatch_resyncs_from_exact_cells
     assert c.on_robot_merge("r1", 0.3, op) is None  # a duplicate changes nothing
     c.flush()
     assert c.merged.explored_area() == pytest.approx(robot.explored_area(), rel=1e-6)
-    # the copy is replaced by the dissolved map: same space, other cuts
-    c.on_robot_map("r2", decode_map(encode_map(robot)))
-    later, op = op_of(robot, rect(1.0, 0.6, 1.8, 3.3, (O, O, O, F)))
-    try:
+    # r2's copy is at the robot's version but not bit-identical: another wall end, in a
+    # cell the next merge changes (the digest covers the cells a merge changes)
+    other, _ = op_of(GridPolyMap(2.0), rect(-0.5, -0.5, 3.3, 0.7, (O, F, O, F)))
+    other, _ = op_of(other, rect(3.0, -0.5, 5.0, 0.7, (O, F, O, O)))
+    assert other.version == robot.version
+    c.on_robot_map("r2", other)
+    later, op = op_of(robot, rect(4.2, 0.6, 4.9, 2.5, (O, O, O, F)))  # over the other end
+    with pytest.raises(DeltaGapError, match="other cells"):
         c.on_robot_merge("r2", 0.4, op)
-    except DeltaGapError:  # the coordinator fetches the robot's map: its exact cells
-        c.on_robot_map("r2", decode_any_map(encode_cells_map(robot)))
-        c.on_robot_merge("r2", 0.5, op)
+    assert c.robot("r2").map is other  # nothing applied
+    # the coordinator fetches the robot's map, served as its exact cells: replays go on
+    c.on_robot_map("r2", decode_any_map(encode_cells_map(later)))
+    newest, op = op_of(later, rect(-0.4, 0.6, 0.4, 2.5, (O, O, F, O)))
+    assert c.on_robot_merge("r2", 0.5, op) is not None
     copy = c.robot("r2").map
-    assert copy.version == later.version
-    assert cells_digest(copy.cells.values()) == cells_digest(later.cells.values())
+    assert copy.version == newest.version
+    assert cells_digest(copy.cells.values()) == cells_digest(newest.cells.values())
 
 
 def test_a_restored_coordinator_merges_what_it_had_applied_but_not_merged():
