@@ -42,7 +42,6 @@ builds a new map object, so a bad message never touches an existing map.
 
 from __future__ import annotations
 
-import contextlib
 import math
 from dataclasses import astuple, fields
 
@@ -212,7 +211,8 @@ def _cell_units(cell_size: float) -> int:
 # ---------------------------------------------------------------------------------------
 
 
-def _unpack(data: bytes, kind: str) -> dict:
+def _unpack(data: bytes, kind: str, *others: str) -> dict:
+    """The message's msgpack map, of type ``kind`` (or one of ``others``)."""
     if not isinstance(data, bytes | bytearray | memoryview):
         raise DecodeError(f"{kind}: expected bytes, got {type(data).__name__}")
     if len(data) > MAX_MESSAGE_BYTES:
@@ -223,7 +223,7 @@ def _unpack(data: bytes, kind: str) -> dict:
         raise DecodeError(f"{kind}: not valid msgpack ({type(e).__name__}: {e})") from None
     if not isinstance(obj, dict):
         raise DecodeError(f"{kind}: expected a msgpack map")
-    if obj.get("t") != kind:
+    if obj.get("t") not in (kind, *others):
         raise DecodeError(f"expected message type {kind!r}, got {obj.get('t')!r}")
     if obj.get("v") != FORMAT_VERSION:
         raise DecodeError(f"{kind}: unsupported format version {obj.get('v')!r}")
@@ -239,7 +239,10 @@ def _int_field(obj: dict, key: str, lo: int, hi: int) -> int:
 
 def decode_map(data: bytes) -> GridPolyMap:
     """Decode a full map; any defect raises ``DecodeError``."""
-    obj = _unpack(data, MAP_TYPE)
+    return _map_from(_unpack(data, MAP_TYPE))
+
+
+def _map_from(obj: dict) -> GridPolyMap:
     cell_u = _int_field(obj, "cs", 1, MAX_CELL_UNITS)
     version = _int_field(obj, "ver", 0, 2**62)
     q = _int_field(obj, "q", 1, 2**30)
@@ -270,7 +273,10 @@ def decode_map(data: bytes) -> GridPolyMap:
 
 def decode_delta(data: bytes) -> MapDelta:
     """Decode a delta; any defect raises ``DecodeError``."""
-    obj = _unpack(data, DELTA_TYPE)
+    return _delta_from(_unpack(data, DELTA_TYPE))
+
+
+def _delta_from(obj: dict) -> MapDelta:
     cell_u = _int_field(obj, "cs", 1, MAX_CELL_UNITS)
     version = _int_field(obj, "ver", 0, 2**62)
     base = _int_field(obj, "base", -1, version)
@@ -325,23 +331,16 @@ def decode_merge(data: bytes) -> MergeOp:
 
 def decode_any_map(data: bytes) -> GridPolyMap:
     """A whole map sent as a ``polymap`` or as all its cells (``encode_cells_map``)."""
-    if _type_of(data) != DELTA_TYPE:
-        return decode_map(data)  # which says what is wrong with anything else
-    delta = decode_delta(data)
+    obj = _unpack(data, MAP_TYPE, DELTA_TYPE)
+    if obj["t"] == MAP_TYPE:
+        return _map_from(obj)
+    delta = _delta_from(obj)
     if delta.base_version != -1:
         raise DecodeError(f"a whole map must be a delta from version -1, not {delta.base_version}")
     try:
         return GridPolyMap(delta.cell_size).apply_delta(delta)
     except PolyswarmError as e:
         raise DecodeError(f"map cannot be rebuilt: {e}") from None
-
-
-def _type_of(data) -> object:
-    if isinstance(data, bytes | bytearray | memoryview) and len(data) <= MAX_MESSAGE_BYTES:
-        with contextlib.suppress(Exception):  # garbage: the real decoder says what is wrong
-            obj = msgpack.unpackb(bytes(data), raw=False)
-            return obj.get("t") if isinstance(obj, dict) else None
-    return None
 
 
 class _Reader:
