@@ -172,7 +172,11 @@ class LidarMount:
 class SlamConfig:
     keyframe_distance_m: float = 0.4
     keyframe_angle_rad: float = 0.3490658503988659  # 20 degrees
-    frontier_range_m: float = 0.2  # invalid beams become frontier points at this range
+    frontier_range_m: float = 0.2  # dropouts (NaN, too short) become frontier points here
+    # a beam with no return within the lidar's range crossed free space: it ends this far
+    # out (Cartographer's missing_data_ray_length); at 0.2 m a robot turning on the spot
+    # stood in the apex of unknown wedges with no room to plan (polyswarm.scan)
+    no_return_free_m: float = 1.0
     # merging keyframes (polyswarm.polymap.MergeOptions)
     notch_fill_m: float = 0.01  # walls smoothed across keyframes: notches this shallow filled
     min_growth_m: float = 0.05  # new explored space thinner than this is noise along walls

@@ -167,7 +167,10 @@ class PolySlam:
         m = self.cfg.mount
         # 1. scan to points (robot frame; invalid beams become short frontier points)
         points = scan_to_points(
-            scan, self.cfg.frontier_range_m, (m.x_m, m.y_m, m.yaw_rad, m.upside_down)
+            scan,
+            self.cfg.frontier_range_m,
+            (m.x_m, m.y_m, m.yaw_rad, m.upside_down),
+            self.cfg.no_return_free_m,
         )
         t["points"] = time.perf_counter()
         # 4. point-to-vector ICP against the obstacle vectors near the robot

@@ -42,6 +42,18 @@ def test_scan_to_points_turns_invalid_beams_into_short_frontier_points():
     assert np.allclose(np.hypot(*pts.xy.T), [1.0, 0.2, 0.2, 0.2, 0.2, 2.0])
 
 
+def test_a_beam_with_no_return_crossed_free_space_a_dropout_did_not():
+    # inf and 30.0 (= range_max) returned nothing within range; NaN and 0.01 (< range_min)
+    # are dropouts
+    scan = LaserScan(np.array([1.0, np.inf, np.nan, 0.01, 30.0, 2.0]), 0.0, 0.1, 0.05, 30.0)
+    pts = scan_to_points(scan, frontier_range_m=0.2, no_return_free_m=1.5)
+    assert pts.valid.tolist() == [True, False, False, False, False, True]
+    assert np.allclose(np.hypot(*pts.xy.T), [1.0, 1.5, 0.2, 0.2, 1.5, 2.0])
+    # never beyond half the sensor's range
+    short = LaserScan(np.array([np.inf]), 0.0, 0.1, 0.05, 2.0)
+    assert np.hypot(*scan_to_points(short, 0.2, no_return_free_m=5.0).xy[0]) == pytest.approx(1.0)
+
+
 def test_keyframe_of_a_square_room_is_the_room():
     angles = np.linspace(-np.pi, np.pi, 721)[:-1]
     ranges = cast_rays((2.0, 2.0), angles, STARTS, ENDS)

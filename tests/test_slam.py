@@ -68,3 +68,36 @@ def test_map_explored_space_only_inside_the_world(rooms_run):
     outside = explored.difference(w.free.buffer(0.1)).area
     assert outside < 0.01 * explored.area
     assert map_iou(explored, w.free) > 0.9
+
+
+def test_a_robot_turning_at_the_maze_start_has_room_to_plan(shared_data):
+    """The 1-robot maze start: corridors longer than the lidar's 30 m left beams with no
+    return at the same bearings in every keyframe of the start turn. As points 0.2 m out
+    they made thin unknown wedges meeting at the robot, which then had no graph node
+    within reach ("no room for radius 0.3 m near the start") and never moved."""
+    from polyswarm.config import with_overrides
+    from polyswarm.errors import PlanningError
+    from polyswarm.navgraph import NavGraph
+    from polyswarm.planner import Planner
+    from sim import spread_start_poses
+
+    w = load_world("data:maze")
+    base = Config()
+    start = spread_start_poses(w, 1, base.sim.robot.radius_m)[0]
+    radius = base.nav.robot_radius_m + base.nav.clearance_margin_m
+    lengths = {}
+    for free_m in (base.slam.frontier_range_m, base.slam.no_return_free_m):
+        cfg = with_overrides(base, {"slam": {"no_return_free_m": free_m}})
+        slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=start)
+        with Simulation(w, cfg.sim, 1, start_poses=[start]) as sim:
+            sim.set_cmd(0, 0.0, 0.6)  # a turn on the spot, as an agent's start turn
+            for e in sim.run(6.0):
+                slam.process(e.scan, e.odom)
+        planner = Planner(slam.map, NavGraph.build(slam.map, radius))
+        goal = slam.pose[:2] + np.array([1.2, 1.2])  # up the corridor beside the start
+        try:
+            lengths[free_m] = planner.plan(slam.pose[:2], goal).length_m
+        except PlanningError as err:  # the old behaviour, recorded
+            lengths[free_m] = str(err)
+    assert "no room" in str(lengths[base.slam.frontier_range_m])  # the scene still bites
+    assert lengths[base.slam.no_return_free_m] == pytest.approx(np.hypot(1.2, 1.2), rel=0.05)

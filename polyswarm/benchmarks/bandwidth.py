@@ -260,7 +260,7 @@ def record_log(path: Path, cfg: Config, seed: int = 0) -> Recording:
     rec = Recording(
         Path(path).name.split(".")[0],
         mount=(m.x_m, m.y_m, m.yaw_rad),
-        free_range_m=cfg.slam.frontier_range_m,
+        free_range_m=cfg.slam.no_return_free_m,
         map_precision_m=cfg.map.whole_map_precision_m,
     )
     for k, s in enumerate(log.scans):
@@ -279,7 +279,7 @@ def record_simulation(world: str, robots: int, sim_s: float, seed: int, cfg: Con
     rec = Recording(
         f"sim-{world.replace(':', '_')}-{robots}",
         mount=(m.x_m, m.y_m, m.yaw_rad),
-        free_range_m=cfg.slam.frontier_range_m,
+        free_range_m=cfg.slam.no_return_free_m,
         map_precision_m=cfg.map.whole_map_precision_m,
     )
     run = explore_in_process(world, robots, sim_s, seed, cfg, on_keyframe=rec.add)
