@@ -20,7 +20,7 @@ import logging
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -69,6 +69,12 @@ DEADLOCK_S = 2.0  # blocked this long next to another robot: the lower priority 
 YIELD_S = 6.0  # ... driving about a metre away for at most this long
 PEER_NEAR_M = 1.5
 PEER_FRESH_S = 2.0
+# scan returns this close to another robot's last pose (radius 0.2 m, poses 2 Hz at up to
+# 0.5 m/s, and both robots' pose errors) are that robot: dropouts for SLAM. In a corridor
+# whose ends are out of range, robots are the only features along it; mapped and
+# matched, a robot that had moved dragged its teammates' ICP down the corridor (zigzag,
+# first lane: jumps of 2.5 and 4.2 m along it)
+PEER_MASK_M = 0.6
 FACING_RAD = 0.3  # at the goal, turn until the frontier is this close to straight ahead
 UNREACHABLE_AFTER_S = 3.0  # planning must fail this long before a target is unreachable
 PLAN_RETRY_S = 0.5  # ... retried this often meanwhile
@@ -100,6 +106,7 @@ class AgentStats:
     plans: int = 0
     plan_failures: int = 0
     distance_m: float = 0.0
+    peer_returns_masked: int = 0  # scan returns taken for other robots, kept from SLAM
     slam_ms: list[float] = field(default_factory=list)
 
 
@@ -234,8 +241,8 @@ class RobotAgent:
         odom = self.odom_at(stamp_s)
         if odom is None:
             return out
-        # 2. PolySLAM: pose, and on keyframes the map delta
-        step = self.slam.process(scan, odom)
+        # 2. PolySLAM: pose, and on keyframes the map delta (other robots are not walls)
+        step = self.slam.process(self._without_peers(scan, stamp_s), odom)
         turned = abs(math.remainder(step.pose[2] - self.pose[2], 2 * math.pi))
         self.pose = step.pose
         if step.keyframe:
@@ -296,6 +303,29 @@ class RobotAgent:
             mutual = self._blocked_by == rid and _priority(self.id) < _priority(rid)
             if not mutual and not self._facing:
                 self._give_way(rid, self.peers[rid][1], stamp_s)
+
+    def _without_peers(self, scan: LaserScan, now_s: float) -> LaserScan:
+        """The scan with returns from other robots (within ``PEER_MASK_M`` of a fresh
+        peer pose) turned into dropouts: neither mapped nor matched by ICP."""
+        peers = [xy for t, xy in self.peers.values() if now_s - t <= PEER_FRESH_S]
+        if not peers:
+            return scan
+        r = np.asarray(scan.ranges, dtype=float)
+        ok = np.isfinite(r)
+        mx, my, myaw, flipped = self._mount()
+        a = (-scan.angles if flipped else scan.angles) + myaw
+        rr = np.where(ok, r, 0.0)
+        world = transform_points(
+            self.pose, np.stack([mx + rr * np.cos(a), my + rr * np.sin(a)], axis=1)
+        )
+        near = np.zeros(len(r), dtype=bool)
+        for xy in peers:
+            near |= np.hypot(*(world - xy).T) <= PEER_MASK_M
+        hit = ok & near
+        if not hit.any():
+            return scan
+        self.stats.peer_returns_masked += int(hit.sum())
+        return replace(scan, ranges=np.where(hit, np.nan, r))
 
     def _unexplained(self, xy_robot: np.ndarray) -> np.ndarray:
         """Scan points (robot frame) farther than ``UNEXPLAINED_M`` from every obstacle

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
-from agents.robot import STUCK_TIMEOUT_S, RobotAgent
+from dataclasses import replace
+
+import numpy as np
+
+from agents.robot import PEER_FRESH_S, STUCK_TIMEOUT_S, RobotAgent
 from polyswarm.config import Config
-from protocols.messages import Assignment, AssignmentKind, Odometry, RobotState
+from polyswarm.polymap import VectorType
+from protocols.messages import Assignment, AssignmentKind, Odometry, Pose, RobotState
 from tests.conftest import room_scan
 
 
@@ -26,3 +31,26 @@ def test_a_robot_that_cannot_move_tells_the_coordinator_it_is_stuck():
     stuck = [s for s in sent if s[1] == RobotState.STUCK]
     assert stuck and stuck[0][2] == 7
     assert stuck[0][0] >= STUCK_TIMEOUT_S  # not before the timeout
+
+
+def test_another_robot_in_the_scan_is_neither_mapped_nor_matched():
+    # r2 stands 2 m ahead of r1 (a 0.2 m disc): the beams it stops are r2, not a wall
+    scan = room_scan(0.0)
+    r = np.asarray(scan.ranges, dtype=float).copy()
+    on_peer = np.abs(scan.angles) < 0.09  # about 0.18 m either side at 2 m
+    r[on_peer] = 1.8
+    scan = replace(scan, ranges=r)
+    agent = RobotAgent("r1", Config(), (0.0, 0.0, 0.0))
+    agent.on_peer_pose("r2", 0.0, Pose(2.0, 0.0, 0.0))
+    kept = np.asarray(agent._without_peers(scan, 0.0).ranges)
+    assert np.isnan(kept[on_peer]).all()
+    assert np.array_equal(kept[~on_peer], r[~on_peer])  # the walls are untouched
+    # a pose older than PEER_FRESH_S says nothing about where r2 is now
+    assert np.array_equal(agent._without_peers(scan, PEER_FRESH_S + 1.0).ranges, r)
+    # through the whole step: the map has walls at 5 m and nothing where r2 stands
+    agent.on_odom(0.0, Odometry(0.0, 0.0, 0.0))
+    agent.on_scan(0.0, scan)
+    st, en, _ = agent.slam.map.vectors([VectorType.OBSTACLE])
+    mid = 0.5 * (st + en)
+    assert len(st) and np.hypot(*(mid - (2.0, 0.0)).T).min() > 1.0
+    assert agent.stats.peer_returns_masked == 2 * on_peer.sum()
