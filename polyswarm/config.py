@@ -431,6 +431,9 @@ def validate(cfg: Config) -> None:
         raise ConfigError("sim.lidar.dropout_prob must be in [0, 1)")
     if cfg.sim.robot.radius_m <= 0:
         raise ConfigError("sim.robot.radius_m must be positive")
+    for name in ("frontier_range_m", "no_return_free_m"):
+        if not (0.0 < getattr(cfg.slam, name) <= 100.0):
+            raise ConfigError(f"slam.{name} must be 0-100 m (not 0)")
     if cfg.sim.raycast_threads < 0:
         raise ConfigError("sim.raycast_threads must be 0 (every core) or a thread count")
     for name in ("blacklist_after_failures", "blacklist_after_looks"):

@@ -52,3 +52,9 @@ def test_range_checks(override):
 def test_missing_file_is_a_clear_error(tmp_path):
     with pytest.raises(ConfigError, match="not found"):
         load_config(tmp_path / "nope.toml")
+
+
+def test_ranges_of_invalid_beams_must_be_positive():
+    for name in ("frontier_range_m", "no_return_free_m"):
+        with pytest.raises(ConfigError, match=name):
+            with_overrides(Config(), {"slam": {name: 0.0}})
