@@ -5,13 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from polyswarm.config import Config
+from polyswarm.config import Config, with_overrides
+from polyswarm.errors import PlanningError
 from polyswarm.evaluation import map_iou
+from polyswarm.navgraph import NavGraph
+from polyswarm.planner import Planner
 from polyswarm.polymap import GridPolyMap, cells_digest
 from polyswarm.runners.slam import metrics, run_world
 from polyswarm.slam import KeyframeSelector, PolySlam
 from protocols.mapcodec import decode_merge, encode_merge
-from sim import Simulation, load_world
+from sim import Simulation, load_world, spread_start_poses
 
 
 def test_keyframe_selector_distance_and_angle():
@@ -75,12 +78,6 @@ def test_a_robot_turning_at_the_maze_start_has_room_to_plan(shared_data):
     return at the same bearings in every keyframe of the start turn. As points 0.2 m out
     they made thin unknown wedges meeting at the robot, which then had no graph node
     within reach ("no room for radius 0.3 m near the start") and never moved."""
-    from polyswarm.config import with_overrides
-    from polyswarm.errors import PlanningError
-    from polyswarm.navgraph import NavGraph
-    from polyswarm.planner import Planner
-    from sim import spread_start_poses
-
     w = load_world("data:maze")
     base = Config()
     start = spread_start_poses(w, 1, base.sim.robot.radius_m)[0]
