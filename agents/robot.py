@@ -31,7 +31,7 @@ from polyswarm.errors import DecodeError, DeltaGapError, MapError, PlanningError
 from polyswarm.navgraph import NavGraph, clear_of
 from polyswarm.planner import Planner
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, VectorType
-from polyswarm.scan import LaserScan, scan_to_points
+from polyswarm.scan import LaserScan, beam_angles, scan_to_points
 from polyswarm.se2 import transform_points
 from polyswarm.slam import PolySlam
 from protocols.keys import SwarmKeys, check_name
@@ -312,12 +312,11 @@ class RobotAgent:
             return scan
         r = np.asarray(scan.ranges, dtype=float)
         ok = np.isfinite(r)
-        mx, my, myaw, flipped = self._mount()
-        a = (-scan.angles if flipped else scan.angles) + myaw
+        mount = self._mount()
+        a = beam_angles(scan, mount)
         rr = np.where(ok, r, 0.0)
-        world = transform_points(
-            self.pose, np.stack([mx + rr * np.cos(a), my + rr * np.sin(a)], axis=1)
-        )
+        ends = np.stack([rr * np.cos(a), rr * np.sin(a)], axis=1) + mount[:2]
+        world = transform_points(self.pose, ends)
         near = np.zeros(len(r), dtype=bool)
         for xy in peers:
             near |= np.hypot(*(world - xy).T) <= PEER_MASK_M

@@ -48,6 +48,13 @@ class ScanPoints:
     origin: np.ndarray = field(default_factory=lambda: np.zeros(2))  # sensor, robot frame
 
 
+def beam_angles(scan: LaserScan, mount: tuple[float, float, float, bool]) -> np.ndarray:
+    """Each beam's direction in the robot frame (radians, in the scan's beam order) for a
+    lidar at ``mount`` = (x, y, yaw, upside_down)."""
+    a = -scan.angles if mount[3] else scan.angles  # upside down: sweeps clockwise
+    return a + mount[2]
+
+
 def scan_to_points(
     scan: LaserScan,
     frontier_range_m: float = 0.2,
@@ -58,12 +65,9 @@ def scan_to_points(
 
     ``no_return_free_m`` (metres; default ``frontier_range_m``) is where a beam with no
     return within the maximum range ends; never beyond half the maximum range."""
-    mx, my, myaw, flipped = mount
+    mx, my = mount[:2]
     r = np.asarray(scan.ranges, dtype=float)
-    a = scan.angles
-    if flipped:  # an upside-down lidar sweeps clockwise as seen from above
-        a = -a
-    a = a + myaw
+    a = beam_angles(scan, mount)
     order = np.argsort(a, kind="stable")  # beam order counter-clockwise
     r, a = r[order], a[order]
     valid = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
