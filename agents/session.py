@@ -433,14 +433,17 @@ def is_alive_change(item: Received) -> bool | None:
     return item.msg.alive if isinstance(item.msg, _Alive) else None
 
 
-def stop_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM: a process's main loop stops cleanly on it."""
+def stop_on_signals(hangup: bool = False) -> threading.Event:
+    """An event set by SIGINT or SIGTERM (and SIGHUP if ``hangup``): a process's main loop
+    stops cleanly on it. SIGINT is handled even where the shell ignores it (a job started
+    in the background), so ``kill -INT`` stops such a process cleanly too."""
     stop = threading.Event()
 
     def handler(signum, frame) -> None:
         log.info("%s received: stopping", signal.Signals(signum).name)
         stop.set()
 
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    signals = [signal.SIGINT, signal.SIGTERM] + ([signal.SIGHUP] if hangup else [])
+    for sig in signals:
+        signal.signal(sig, handler)
     return stop

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import json
 import re
+import shlex
+import signal
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 from protocols.files import read_polymap
 
@@ -57,3 +61,58 @@ def test_launch_two_robots_explores_rooms_to_95_percent(tmp_path):
     merges, deltas, fetches = map(int, m.groups())
     assert merges > deltas and fetches == 0
     assert "other cells than the sender" not in text
+
+
+def _children_of(pid: int) -> set[int]:
+    """The process ids whose parent is ``pid`` (from /proc)."""
+    kids = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue  # the process ended while we looked
+        if int(fields[1]) == pid:
+            kids.add(int(stat.parent.name))
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_sigint_stops_a_background_launch_and_writes_its_outputs(tmp_path):
+    """A launch started in the background, where the shell ignores SIGINT, stops every
+    child within 5 s of `kill -INT` (SIGTERM and SIGHUP take the same path) and still
+    writes its run folder."""
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "1", "--world", "rooms"]
+    cmd += ["--wall-limit", "120", "--out", str(out)]
+    shell = f"trap '' INT; exec {shlex.join(cmd)}"  # SIGINT ignored, as for `launch &`
+    proc = subprocess.Popen(["sh", "-c", shell], stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        kids: set[int] = set()
+        while time.monotonic() < deadline and len(kids) < 4:  # router, coordinator, sim, r1
+            time.sleep(0.5)
+            kids = _children_of(proc.pid)
+        assert len(kids) == 4, "the launch did not start its processes"
+        time.sleep(5.0)  # the robot is under way
+        proc.send_signal(signal.SIGINT)
+        t0 = time.monotonic()
+        while any(_alive(k) for k in kids) and time.monotonic() - t0 < 10:
+            time.sleep(0.1)
+        children_gone_s = time.monotonic() - t0
+        _out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert children_gone_s <= 5.0, f"children still running {children_gone_s:.1f} s after"
+    assert proc.returncode == 0, err[-2000:]
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["stopped_because"] == "interrupted"
+    assert m["crashed_processes"] == []
+    assert read_polymap(out / "map.polymap").explored_area() > 0

@@ -200,9 +200,10 @@ def launch_cmd(
         "(probabilities), e.g. drop=0.1,dup=0.05,reorder=0.05.",
     ),
 ) -> None:
-    """Explore a simulated world with N robots: coordinator, sim and agents as processes."""
-    import threading
+    """Explore a simulated world with N robots: coordinator, sim and agents as processes.
 
+    Ctrl-C, SIGTERM or SIGHUP (also when launched in the background, where the shell
+    ignores SIGINT) stops every process and still writes the run folder."""
     from rich.console import Console
     from rich.live import Live
     from rich.table import Table
@@ -217,7 +218,7 @@ def launch_cmd(
         raise ConfigError(
             f"--strategy must be hungarian, greedy or nearest, not {strategy!r}"
         ) from None
-    from agents.session import LinkFaults
+    from agents.session import LinkFaults, stop_on_signals
 
     LinkFaults.parse(link_faults)  # a bad specification fails here, not in the children
     opts = LaunchOptions(
@@ -258,13 +259,9 @@ def launch_cmd(
             )
         return t
 
-    stop = threading.Event()
+    stop = stop_on_signals(hangup=True)  # the launch ends as at its limits: outputs written
     with Live(console=console, refresh_per_second=2, transient=False) as live:
-        try:
-            res = launch(opts, progress=lambda obs, wall: live.update(view(obs, wall)), stop=stop)
-        except KeyboardInterrupt:
-            stop.set()
-            raise
+        res = launch(opts, progress=lambda obs, wall: live.update(view(obs, wall)), stop=stop)
     m = res.metrics
     table = Table(title=f"exploration of {m['world']} ({m['stopped_because']})")
     table.add_column("metric")
