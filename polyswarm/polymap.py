@@ -9,7 +9,8 @@ Conventions (see ``protocols/PROTOCOL.md``):
 * every vertex lies on a 10 micrometre precision grid (``PRECISION_M``); set operations
   round to that grid (GEOS snap rounding as the fallback), never exact float tests. The
   grid is fine enough that merging keyframes in any order gives the same explored area
-  within 1e-6 relative, and coarse enough to absorb floating-point noise;
+  but for strips thinner than ``SLIVER_M`` (property tests: the keyframes' perimeters
+  x SLIVER_M at most), and coarse enough to absorb floating-point noise;
 * the map is a ``GridPolyMap``: a grid of square cells, each holding the explored
   space inside its square as closed simple rings. A vector on a cell border with
   explored space on the other side is a *sector*; the cell is also the unit of a delta.
@@ -21,6 +22,7 @@ failed merge can never leave a half-updated map behind.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import logging
 import math
 from collections.abc import Iterable, Mapping
@@ -580,7 +582,12 @@ class GridPolyMap:
         old = np.array(
             [self.cells[i].region if i in self.cells else empty for i in idxs], dtype=object
         )
-        regions = _clean(_union_snapped(old, pieces))
+        # a piece the old region covers leaves it as it was (most cells of a keyframe:
+        # the robot sees again what it has mapped), so only the others are united
+        regions = old.copy()
+        grows = shapely.is_empty(old) | ~shapely.covers(old, pieces)
+        if grows.any():
+            regions[grows] = _clean(_union_snapped(old[grows], pieces[grows]))
         old_area = shapely.area(old)
         grew = shapely.area(regions) - old_area
         maybe = (grew > 0) & (grew <= shapely.length(old) * SLIVER_M) & ~shapely.is_empty(old)
@@ -608,11 +615,29 @@ class GridPolyMap:
         # (only around regions that moved: the others were noded when they last changed)
         moved = {i for i, r, o in zip(idxs, regions, old, strict=True) if r is not o}
         need = moved | {n for i in moved for n in _neighbours(i)}
-        regions = _node_borders(idxs, regions, self.cells, self.cell_size, need)
         # obstacle sources: the new polygon's obstacle vectors and the old ones of these cells
         olds = [self.cells[i].obstacle_vectors for i in idxs if i in self.cells]
         starts = np.concatenate([src_starts.reshape(-1, 2)] + [o[0] for o in olds])
         ends = np.concatenate([src_ends.reshape(-1, 2)] + [o[1] for o in olds])
+        # a cell whose region and neighbours stay as they were can change only where an
+        # obstacle vector retypes one of its frontiers; the others are not typed again
+        same = [self.cells[i] for i in idxs if i not in need and i in self.cells]
+        fronts = [c.vectors_of_type(VectorType.FRONTIER) for c in same]
+        owner = np.repeat(np.arange(len(same)), [len(f[0]) for f in fronts])
+        if len(owner):
+            retyped = _obstacle_mask(
+                np.concatenate([f[0] for f in fronts]),
+                np.concatenate([f[1] for f in fronts]),
+                starts,
+                ends,
+                _segment_tree(starts, ends),
+                opt.obstacle_snap_m,
+                (opt.obstacle_snap_behind_m, opt.obstacle_snap_front_m),
+            )
+            need.update(same[k].index for k in np.unique(owner[retyped]))
+        keep = [k for k, i in enumerate(idxs) if i in need]
+        idxs, regions = [idxs[k] for k in keep], regions[keep]
+        regions = _node_borders(idxs, regions, self.cells, self.cell_size, need)
         neighbour_region = {i: r for i, r in zip(idxs, regions, strict=True)}
         new_cells = _typed_cells(
             idxs,
@@ -1124,59 +1149,55 @@ def _typed_cells(
     """
     polys, poly_cell = _polygon_parts(regions)
     cell_ij = np.array(idxs, dtype=np.int64).reshape(-1, 2)
-    grown: dict[CellIndex, shapely.Geometry] = {}  # neighbours' regions grown by SECTOR_TOL_M
-
-    def across(key: CellIndex) -> shapely.Geometry | None:
-        return _region_at(key, new_regions, old_cells)
 
     def sectors(a, b, mid, e_owner, types):
         ij = cell_ij[e_owner]
         x0 = ij[:, 0] * cell_size
         y0 = ij[:, 1] * cell_size
         on = lambda v, c: np.abs(v - c) <= BORDER_TOL_M  # noqa: E731
-        sides = (
-            on(a[:, 0], x0) & on(b[:, 0], x0),
-            on(a[:, 0], x0 + cell_size) & on(b[:, 0], x0 + cell_size),
-            on(a[:, 1], y0) & on(b[:, 1], y0),
-            on(a[:, 1], y0 + cell_size) & on(b[:, 1], y0 + cell_size),
-        )
-        for side, (di, dj) in zip(sides, ((-1, 0), (1, 0), (0, -1), (0, 1)), strict=True):
-            # free space across the border makes a sector even where an obstacle vector
-            # once lay on the border: the wall was not there (both sides are free)
-            cand = np.nonzero(side)[0]
-            if len(cand) == 0:
-                continue
-            keys = [(i + di, j + dj) for i, j in ij[cand].tolist()]
-            geoms = np.array([across(key) for key in keys], dtype=object)
-            has = np.array([g is not None for g in geoms], dtype=bool)
-            touch = np.zeros(len(cand), dtype=bool)
-            if has.any():
-                # explored space across the border along all of the vector but for
-                # SECTOR_GAP_M (SECTOR_TOL_M absorbs rounding between the two sides)
-                c, g = cand[has], geoms[has]
-                lines = shapely.linestrings(np.stack([a[c], b[c]], axis=1))
-                near = shapely.dwithin(g, lines, SECTOR_TOL_M)
-                if near.any():
-                    k = np.nonzero(near)[0]
-                    near_keys = [keys[x] for x in np.nonzero(has)[0][k]]
-                    todo = sorted({key for key in near_keys if key not in grown})
-                    if todo:  # each neighbour grown once, however many vectors face it
-                        grown.update(
-                            zip(
-                                todo,
-                                shapely.buffer(
-                                    np.array([across(key) for key in todo], dtype=object),
-                                    SECTOR_TOL_M,
-                                    quad_segs=1,
-                                ),
-                                strict=True,
-                            )
-                        )
-                    cover = np.array([grown[key] for key in near_keys], dtype=object)
-                    gap = shapely.length(shapely.difference(lines[k], cover))
-                    near[k] = gap <= SECTOR_GAP_M
-                touch[has] = near
-            types[cand[touch]] = VectorType.SECTOR
+        # per side: vectors on it, the neighbour across, the border line (axis, at)
+        cand, nb, axis, line = [], [], [], []
+        for side, ax, at, step in (
+            (on(a[:, 0], x0) & on(b[:, 0], x0), 0, x0, (-1, 0)),
+            (on(a[:, 0], x0 + cell_size) & on(b[:, 0], x0 + cell_size), 0, x0 + cell_size, (1, 0)),
+            (on(a[:, 1], y0) & on(b[:, 1], y0), 1, y0, (0, -1)),
+            (on(a[:, 1], y0 + cell_size) & on(b[:, 1], y0 + cell_size), 1, y0 + cell_size, (0, 1)),
+        ):
+            k = np.nonzero(side)[0]
+            cand.append(k)
+            nb.append(ij[k] + np.array(step))
+            axis.append(np.full(len(k), ax))
+            line.append(at[k])
+        cand = np.concatenate(cand)
+        if len(cand) == 0:
+            return
+        nb, axis, line = np.concatenate(nb), np.concatenate(axis), np.concatenate(line)
+        # each neighbour's side once: where its explored space reaches the border
+        keys = list(zip(map(tuple, nb.tolist()), axis.tolist(), line.tolist(), strict=True))
+        uniq = {key: n for n, key in enumerate(dict.fromkeys(keys))}
+        which = np.array([uniq[key] for key in keys])
+        first = np.unique(which, return_index=True)[1]
+        geoms = [_region_at(key[0], new_regions, old_cells) for key in uniq]
+        lo, hi, owner = _border_cover(geoms, axis[first], line[first])
+        # explored space across the border along all of the vector but for SECTOR_GAP_M
+        # (SECTOR_TOL_M absorbs rounding between the two sides); free space across the
+        # border makes a sector even where an obstacle vector once lay on the border:
+        # the wall was not there (both sides are free)
+        v_lo = np.minimum(a[cand, 1 - axis], b[cand, 1 - axis])
+        v_hi = np.maximum(a[cand, 1 - axis], b[cand, 1 - axis])
+        n_iv = np.bincount(owner, minlength=len(uniq))
+        at_iv = np.concatenate([[0], np.cumsum(n_iv)[:-1]])
+        reps = n_iv[which]
+        if reps.sum() == 0:
+            return
+        c = np.repeat(np.arange(len(cand)), reps)  # every (vector, interval across) pair
+        iv = np.repeat(at_iv[which] - np.concatenate([[0], np.cumsum(reps)[:-1]]), reps)
+        iv += np.arange(len(c))
+        over = np.minimum(hi[iv], v_hi[c]) - np.maximum(lo[iv], v_lo[c])
+        touch = np.zeros(len(cand), dtype=bool)
+        touch[c[over >= 0]] = True
+        covered = np.bincount(c, weights=over.clip(0), minlength=len(cand))
+        types[cand[touch & (v_hi - v_lo - covered <= SECTOR_GAP_M)]] = VectorType.SECTOR
 
     out = _typed_polygons(
         polys, poly_cell, src_starts, src_ends, sectors, obstacle_snap_m, snap_beside_m
@@ -1185,6 +1206,43 @@ def _typed_cells(
     for c, g in zip(cells, _build_regions(cells), strict=True):
         c.__dict__["region"] = g  # fill the cached property in one vectorised pass
     return {c.index: c for c in cells}
+
+
+def _border_cover(
+    geoms: list[shapely.Geometry | None], axis: np.ndarray, at: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where each region ``geoms[k]`` reaches the line coordinate[axis[k]] == at[k] (a
+    border of its cell): disjoint intervals of the other coordinate, each grown by
+    SECTOR_TOL_M, as (lo, hi, k) sorted by k. A region clipped to its cell meets its
+    border along edges lying on it (a vertex alone gives a point)."""
+    g = np.array([_EMPTY if x is None else x for x in geoms], dtype=object)
+    parts, part_of = shapely.get_parts(g, return_index=True)
+    rings, ring_of = shapely.get_rings(parts, return_index=True)
+    xy, coord_of = shapely.get_coordinates(rings, return_index=True)
+    own = part_of[ring_of[coord_of]]
+    same = coord_of[1:] == coord_of[:-1]
+    p, q, own = xy[:-1][same], xy[1:][same], own[:-1][same]
+    ax, line = axis[own], at[own]
+    rows = np.arange(len(p))
+    start = np.abs(p[rows, ax] - line) <= SECTOR_TOL_M  # every vertex there starts an edge
+    along = start & (np.abs(q[rows, ax] - line) <= SECTOR_TOL_M)
+    u = p[rows, 1 - ax]
+    v = np.where(along, q[rows, 1 - ax], u)
+    u, v, own = u[start], v[start], own[start]
+    lo, hi = np.minimum(u, v) - SECTOR_TOL_M, np.maximum(u, v) + SECTOR_TOL_M
+    order = np.lexsort((lo, own))
+    lo, hi, own = lo[order], hi[order], own[order]
+    if len(lo) == 0:
+        return lo, hi, own
+    # merge overlapping intervals of one region: a new one starts past the farthest end
+    # so far of that region
+    reach = np.empty_like(hi)
+    groups = np.r_[True, own[1:] != own[:-1]]
+    for s, e in itertools.pairwise([*np.nonzero(groups)[0], len(hi)]):
+        reach[s:e] = np.maximum.accumulate(hi[s:e])
+    first = groups | np.r_[True, lo[1:] > reach[:-1]]
+    at_first = np.nonzero(first)[0]
+    return lo[first], np.maximum.reduceat(hi, at_first), own[first]
 
 
 def _build_regions(cells: list[Cell]) -> list[shapely.Geometry]:
@@ -1248,37 +1306,11 @@ def _typed_polygons(
     a, b = coords[:-1][same], coords[1:][same]
     e_ring = ring_of[:-1][same]
     types = np.full(len(a), VectorType.FRONTIER, dtype=np.uint8)
-    mid = 0.5 * (a + b)
     tree = _segment_tree(src_starts, src_ends)  # one index of the sources for every test
-    types[_along_obstacles(a, b, mid, src_starts, src_ends, tree=tree)] = VectorType.OBSTACLE
-    if obstacle_snap_m > 0:
-        front = np.nonzero(types == VectorType.FRONTIER)[0]
-        near = _along_obstacles(
-            a[front],
-            b[front],
-            mid[front],
-            src_starts,
-            src_ends,
-            obstacle_snap_m,
-            SNAP_ANGLE_DEG,
-            tree,
-        )
-        types[front[near]] = VectorType.OBSTACLE
-    if max(snap_beside_m) > 0:
-        front = np.nonzero(types == VectorType.FRONTIER)[0]
-        beside = _beside_obstacles(
-            a[front],
-            b[front],
-            src_starts,
-            src_ends,
-            max(snap_beside_m[0], MATCH_TOL_M),
-            max(snap_beside_m[1], MATCH_TOL_M),
-            SNAP_ANGLE_DEG,
-            tree,
-        )
-        types[front[beside]] = VectorType.OBSTACLE
+    obstacle = _obstacle_mask(a, b, src_starts, src_ends, tree, obstacle_snap_m, snap_beside_m)
+    types[obstacle] = VectorType.OBSTACLE
     if sectors is not None:
-        sectors(a, b, mid, owner[ring_poly[e_ring]], types)
+        sectors(a, b, 0.5 * (a + b), owner[ring_poly[e_ring]], types)
 
     # canonical rings: drop zero-length vectors and collinear vertices between vectors
     # of one type, start each ring at its lowest (x, y) vertex: equal regions give
@@ -1333,6 +1365,49 @@ def _typed_polygons(
         tp.sort(key=lambda p: _ring_key(p.shell))
         out[k] = tp
     return out
+
+
+def _obstacle_mask(
+    a: np.ndarray,
+    b: np.ndarray,
+    src_starts: np.ndarray,
+    src_ends: np.ndarray,
+    tree: shapely.STRtree | None,
+    obstacle_snap_m: float = 0.0,
+    snap_beside_m: tuple[float, float] = (0.0, 0.0),
+) -> np.ndarray:
+    """Vectors a->b that are obstacles by the source obstacle vectors (``tree`` is their
+    ``_segment_tree``): along one, or with the snap distances not zero, running along one
+    within ``obstacle_snap_m`` or beside obstacles all along (``_typed_polygons``)."""
+    mid = 0.5 * (a + b)
+    hit = _along_obstacles(a, b, mid, src_starts, src_ends, tree=tree)
+    if obstacle_snap_m > 0:
+        front = np.nonzero(~hit)[0]
+        near = _along_obstacles(
+            a[front],
+            b[front],
+            mid[front],
+            src_starts,
+            src_ends,
+            obstacle_snap_m,
+            SNAP_ANGLE_DEG,
+            tree,
+        )
+        hit[front[near]] = True
+    if max(snap_beside_m) > 0:
+        front = np.nonzero(~hit)[0]
+        beside = _beside_obstacles(
+            a[front],
+            b[front],
+            src_starts,
+            src_ends,
+            max(snap_beside_m[0], MATCH_TOL_M),
+            max(snap_beside_m[1], MATCH_TOL_M),
+            SNAP_ANGLE_DEG,
+            tree,
+        )
+        hit[front[beside]] = True
+    return hit
 
 
 def _segment_tree(starts: np.ndarray, ends: np.ndarray) -> shapely.STRtree | None:

@@ -333,11 +333,14 @@ def test_merge_laws(kfs, cell_size):
     # idempotent: every keyframe merged again changes nothing
     for kf in kfs:
         assert not pmap.merge(kf).changed
-    # order independent up to the precision grid
+    # order independent up to the precision grid: growth thinner than SLIVER_M is dropped,
+    # and whether a thin strip counts as growth depends on what was merged before it
+    # (found: 8 overlapping keyframes 1-5 m across differed by 4e-5 m2 in reverse order)
     rev = GridPolyMap(cell_size)
     for kf in reversed(kfs):
         rev = rev.merge(kf).map
-    assert rev.explored_area() == pytest.approx(pmap.explored_area(), rel=1e-6, abs=1e-6)
+    bound = sum(k.to_shapely().length for k in kfs) * SLIVER_M
+    assert abs(rev.explored_area() - pmap.explored_area()) <= bound
 
 
 @given(st.lists(keyframes(), min_size=2, max_size=5))
