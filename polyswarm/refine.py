@@ -164,23 +164,22 @@ def _angle_between(a: LineFit, b: LineFit) -> float:
     return math.degrees(math.acos(min(1.0, c)))  # 0..90 degrees between the lines
 
 
-def refine_ring(
-    xy: np.ndarray,
-    types: np.ndarray,
-    cfg: RefineConfig,
-    intersections: bool = True,
-    pinned: np.ndarray | None = None,
-    tents: bool = True,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Refined vertices and vector types of a closed ring (vector i: xy[i] -> xy[i+1]).
+@dataclass(frozen=True)
+class RingFit:
+    """A ring cut into chains and fitted with lines: the part of the refinement that
+    does not depend on how lines are joined (``join_lines``)."""
 
-    ``pinned`` vertices end a chain and stay where they are: with ``tents`` the lines on
-    both sides stop at their projections of the vertex and two short vectors visit it,
-    otherwise the vertex itself joins the two lines.
-    """
+    closed: np.ndarray  # the ring's vertices, rotated to start a chain, first repeated last
+    pin: np.ndarray  # pinned vertices, rotated the same way
+    segs: list[tuple[int, int, int, LineFit]]  # (type, first vertex, last vertex, fit)
+
+
+def fit_ring(
+    xy: np.ndarray, types: np.ndarray, cfg: RefineConfig, pinned: np.ndarray | None = None
+) -> RingFit:
+    """Algorithm 3 on every chain of a closed ring (vector i: xy[i] -> xy[i+1]);
+    ``pinned`` vertices end a chain."""
     n = len(xy)
-    if n < 3:
-        return xy, types
     pin = np.zeros(n, dtype=bool) if pinned is None else np.asarray(pinned, dtype=bool)
     cut = (types != np.roll(types, 1)) | pin
     change = np.nonzero(cut)[0]
@@ -191,12 +190,25 @@ def refine_ring(
     cut = np.roll(cut, -start)
     bounds = [*np.nonzero(cut)[0].tolist(), n] if len(change) else [0, n]
     closed = np.vstack([xy, xy[:1]])
-    segs: list[tuple[int, int, int, LineFit]] = []  # (type, first vertex, last vertex, fit)
+    segs: list[tuple[int, int, int, LineFit]] = []
     for a, b in itertools.pairwise(bounds):
         if a == b:
             continue
         for i0, i1, fit in fit_chain(closed[a : b + 1], cfg):
             segs.append((int(types[a]), a + i0, a + i1, fit))
+    return RingFit(closed, pin, segs)
+
+
+def join_lines(
+    fitted: RingFit, cfg: RefineConfig, intersections: bool = True, tents: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and vector types of the ring the fitted lines make, joined where
+    consecutive lines meet (below ``flat_angle_deg``, or without ``intersections``, at
+    the projections of the shared vertex). A pinned vertex stays where it is: with
+    ``tents`` the lines on both sides stop at their projections of the vertex and two
+    short vectors visit it, otherwise the vertex itself joins the two lines."""
+    closed, pin, segs = fitted.closed, fitted.pin, fitted.segs
+    n = len(closed) - 1
     out_xy: list[np.ndarray] = []
     out_t: list[int] = []
     k = len(segs)
@@ -235,6 +247,21 @@ def refine_ring(
     return np.array(out_xy), np.array(out_t, dtype=np.uint8)
 
 
+def refine_ring(
+    xy: np.ndarray,
+    types: np.ndarray,
+    cfg: RefineConfig,
+    intersections: bool = True,
+    pinned: np.ndarray | None = None,
+    tents: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Refined vertices and vector types of a closed ring (vector i: xy[i] -> xy[i+1]):
+    ``fit_ring`` then ``join_lines``."""
+    if len(xy) < 3:
+        return xy, types
+    return join_lines(fit_ring(xy, types, cfg, pinned), cfg, intersections, tents)
+
+
 def _dedupe(pts: list[np.ndarray], tol: float = 1e-6) -> list[np.ndarray]:
     out = [pts[0]]
     for p in pts[1:]:
@@ -264,14 +291,21 @@ def refine_polygon(
     point next to a fitted wall, is pinned and the ring refined again.
     """
     xy, types = poly.shell.xy, poly.shell.types
+    if len(xy) < 3:
+        return poly, "raw"
     limit = cfg.max_point_error_m if cfg.max_point_error_m > 0 else math.inf
     points = shapely.points(xy)
+    fits: dict[bytes, RingFit] = {}  # the lines depend on the pins only: fitted once each
     for how, inter in (("refined", True), ("projected", False)):
         pinned = np.zeros(len(xy), dtype=bool)
         best = None
         for _ in range(rounds + 1):
-            for tents in (True, False):  # a tent can cross a neighbour: then a plain vertex
-                rx, rt = refine_ring(xy, types, cfg, inter, pinned, tents)
+            key = np.packbits(pinned).tobytes()
+            if key not in fits:
+                fits[key] = fit_ring(xy, types, cfg, pinned)
+            # a tent can cross a neighbour: then a plain vertex (the same without pins)
+            for tents in (True, False) if pinned.any() else (True,):
+                rx, rt = join_lines(fits[key], cfg, inter, tents)
                 if _valid_ring(rx):
                     break
             else:
