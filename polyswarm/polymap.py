@@ -986,51 +986,81 @@ def _node_borders(
     (the overlay keeps every vertex of both inputs on shared edges; all are on the grid,
     so the geometry does not change). Only the cells in ``need`` are noded."""
     new = dict(zip(idxs, regions, strict=True))
-    coords: dict[CellIndex, np.ndarray] = {}  # each region's vertices, fetched once
-
-    def vertices(ix: CellIndex) -> np.ndarray:
-        if ix not in coords:
-            g = _region_at(ix, new, old_cells)
-            coords[ix] = np.zeros((0, 2)) if g is None else shapely.get_coordinates(g)
-        return coords[ix]
-
+    target = {ix: k for k, ix in enumerate(idxs) if ix in need}
+    if not target:
+        return regions
+    # every vertex of the targets' regions and of their neighbours', with its cell
+    keys = list(dict.fromkeys([*target, *(n for ix in target for n in _neighbours(ix))]))
+    geoms = [_region_at(ix, new, old_cells) for ix in keys]
+    xy, which = shapely.get_coordinates(
+        np.array([_EMPTY if g is None else g for g in geoms], dtype=object), return_index=True
+    )
+    cell = np.array(keys, dtype=np.int64).reshape(-1, 2)[which]
+    # per side of a target (0 bottom, 1 right, 2 top, 3 left), what lies on that line:
+    # the target's own vertices, and its neighbour's inside the side (node candidates)
+    t_of = {ix: n for n, ix in enumerate(target)}
+    own_g, own_t, cand_g, cand_t, cand_a = [], [], [], [], []
+    for side, (di, dj), across in (
+        (0, (0, -1), 1),
+        (1, (1, 0), 0),
+        (2, (0, 1), 1),
+        (3, (-1, 0), 0),
+    ):
+        far = side in (1, 2)  # the side's line is the cell's upper bound on that axis
+        line = (cell[:, across] + far) * size
+        lo = cell[:, 1 - across] * size
+        on = np.abs(xy[:, across] - line) <= BORDER_TOL_M
+        t = xy[:, 1 - across] - lo  # along the side, from its low end
+        # own vertices: this side of a target
+        k = np.nonzero(on)[0]
+        tid = np.array([t_of.get(ix, -1) for ix in map(tuple, cell[k].tolist())], dtype=np.int64)
+        ok = tid >= 0
+        own_g.append(tid[ok] * 4 + side)
+        own_t.append(t[k[ok]])
+        # a neighbour's vertex on its opposite side, inside it, nodes the target's side
+        opp = (side + 2) % 4
+        far_o = opp in (1, 2)
+        on_o = np.abs(xy[:, across] - (cell[:, across] + far_o) * size) <= BORDER_TOL_M
+        on_o &= (t > BORDER_TOL_M) & (t < size - BORDER_TOL_M)
+        k = np.nonzero(on_o)[0]
+        host = cell[k] - np.array((di, dj))  # the target across that side
+        tid = np.array([t_of.get(ix, -1) for ix in map(tuple, host.tolist())], dtype=np.int64)
+        ok = tid >= 0
+        cand_g.append(tid[ok] * 4 + side)
+        cand_t.append(t[k[ok]])
+        cand_a.append(xy[k[ok], 1 - across])
+    own_g, own_t = np.concatenate(own_g), np.concatenate(own_t)
+    cand_g, cand_t, cand_a = (np.concatenate(x) for x in (cand_g, cand_t, cand_a))
+    has_own = np.zeros(len(target), dtype=bool)
+    has_own[np.unique(own_g // 4)] = True
+    keep = has_own[cand_g // 4]  # an empty region is not noded
+    # vertices the region already has there need no node
+    span = 4.0 * size  # keys of different sides lie farther apart than any tolerance
+    own_key = np.sort(own_g * span + own_t)
+    key = cand_g * span + cand_t
+    pos = np.searchsorted(own_key, key)
+    near = np.full(len(key), np.inf)
+    if len(own_key):
+        for p_ in (pos - 1, pos):
+            ok = (p_ >= 0) & (p_ < len(own_key))
+            near[ok] = np.minimum(near[ok], np.abs(own_key[p_[ok]] - key[ok]))
+    keep &= near > BORDER_TOL_M
+    cand_g, cand_a = cand_g[keep], cand_a[keep]
+    extra: dict[int, list[list[float]]] = {}
+    for g in np.unique(cand_g).tolist():
+        along = cand_a[cand_g == g]  # the vertices' own coordinates: exactly on the grid
+        extra.setdefault(g // 4, [[], [], [], []])[g % 4] = sorted(set(along.tolist()))
     ks, boxes = [], []
-    for k, (i, j) in enumerate(idxs):
-        if (i, j) not in need:
-            continue
-        own = vertices((i, j))
-        if len(own) == 0:
-            continue
+    tlist = list(target)
+    for n, sides in sorted(extra.items()):
+        i, j = tlist[n]
         x0, y0 = i * size, j * size
         x1, y1 = x0 + size, y0 + size
-        # per side (bottom, right, top, left): the varying coordinate of extra vertices
-        sides: list[list[float]] = [[], [], [], []]
-        for side, (di, dj) in enumerate(((0, -1), (1, 0), (0, 1), (-1, 0))):
-            xy = vertices((i + di, j + dj))
-            if len(xy) == 0:
-                continue
-            # across (the coordinate fixed on this side) and along it
-            c_across, c_along = (1, 0) if side % 2 == 0 else (0, 1)
-            line, along = xy[:, c_across], xy[:, c_along]
-            lo, hi = (x0, x1) if side % 2 == 0 else (y0, y1)
-            at = (y0, x1, y1, x0)[side]
-            on = (np.abs(line - at) <= BORDER_TOL_M) & (along > lo + BORDER_TOL_M)
-            on &= along < hi - BORDER_TOL_M
-            if not on.any():
-                continue
-            # vertices the region already has there need no node
-            have = own[np.abs(own[:, c_across] - at) <= BORDER_TOL_M, c_along]
-            extra = along[on]
-            if len(have):
-                extra = extra[np.abs(extra[:, None] - have[None, :]).min(axis=1) > BORDER_TOL_M]
-            sides[side] = sorted(set(extra.tolist()))
-        if not any(sides):
-            continue
         ring = [(x0, y0)] + [(x, y0) for x in sides[0]]
         ring += [(x1, y0)] + [(x1, y) for y in sides[1]]
         ring += [(x1, y1)] + [(x, y1) for x in reversed(sides[2])]
         ring += [(x0, y1)] + [(x0, y) for y in reversed(sides[3])]
-        ks.append(k)
+        ks.append(target[(i, j)])
         boxes.append(shapely.Polygon(ring))
     if not ks:
         return regions
