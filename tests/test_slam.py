@@ -63,6 +63,11 @@ def test_simulated_run_is_accurate_and_maps_the_world(rooms_run):
     assert m["map_iou"] > 0.9
     assert m["wall_distance_mean_m"] < 0.05
     assert rooms_run.slam.rejected_keyframes == 0
+    # the stages' times are reported and add up to the keyframe's
+    stages = m["keyframe_stage_ms"]
+    assert {"icp", "loop", "refine", "merge", "total"} <= set(stages)
+    parts = sum(v["p50"] for k, v in stages.items() if k != "total")
+    assert 0 < parts <= 1.5 * stages["total"]["p50"]
 
 
 def test_map_explored_space_only_inside_the_world(rooms_run):

@@ -18,7 +18,7 @@ from polyswarm.config import Config, RefineConfig
 from polyswarm.data import WORLDS, log_paths
 from polyswarm.odometry import IncrementNoise
 from polyswarm.refine import refine_polygon
-from polyswarm.runners.slam import metrics, run_log, run_world
+from polyswarm.runners.slam import metrics, run_log, run_world, stage_percentiles
 
 THESIS_MAX_ERROR_RATIO = {"loop": 0.0043, "cross": 0.0016, "zigzag": 0.00074, "maze": 0.00062}
 THESIS_POLYGONS = {"loop": 209585, "cross": 429876, "zigzag": 469110}  # Table 5.8, no overlay
@@ -69,13 +69,14 @@ def run(progress: Callable[[str], None] | None = None, worlds=WORLDS, log_seeds:
     0's; the others show how much one draw of the noise matters)."""
     cfg = Config()
     res: dict = {"worlds": {}, "logs": {}}
-    kf_ms, rt = [], []
+    kf_ms, rt, stages = [], [], []
     for w in worlds:
         if progress:
             progress(f"simulated {w}")
         r = run_world(f"data:{w}", cfg, seed=0)
         m = metrics(r)
         kf_ms += r.keyframe_ms
+        stages += r.stage_ms
         rt.append(m["realtime_factor"])
         res["worlds"][w] = {
             "distance_travelled_m": m["distance_travelled_m"],
@@ -125,5 +126,6 @@ def run(progress: Callable[[str], None] | None = None, worlds=WORLDS, log_seeds:
     res["keyframe_p95_ms"] = float(np.percentile(kf_ms, 95))
     if world_kf_ms:
         res["keyframe_p95_ms_720_beams"] = float(np.percentile(world_kf_ms, 95))
+        res["keyframe_stage_ms_720_beams"] = stage_percentiles(stages)
     res["realtime_factor_min"] = float(min(rt)) if rt else math.nan
     return res

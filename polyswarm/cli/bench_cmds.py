@@ -171,6 +171,8 @@ def bench_slam(
     )
     if "keyframe_p95_ms_720_beams" in res:
         rows.append(("keyframe p95, 720-beam scans", f"{res['keyframe_p95_ms_720_beams']:.1f} ms"))
+        for stage, v in res["keyframe_stage_ms_720_beams"].items():
+            rows.append((f"  {stage} p50 / p95", f"{v['p50']:.1f} / {v['p95']:.1f} ms"))
     rows.append(("real-time factor (worst world)", f"{res['realtime_factor_min']:.1f} x"))
     _emit(res, False, "PolySLAM", rows)
 

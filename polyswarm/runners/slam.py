@@ -44,6 +44,7 @@ class SlamRun:
     world: object | None = None  # sim.World for simulated runs
     online: np.ndarray | None = None  # every scan's pose as estimated when it came in
     final_map: GridPolyMap | None = None  # keyframes merged again at optimised poses
+    stage_ms: list[dict[str, float]] = field(default_factory=list)  # per keyframe, by stage
 
     @property
     def map(self) -> GridPolyMap:
@@ -69,7 +70,7 @@ def run_log(
     ref = log.reference
     odom = noisy_odometry(ref, noise, seed)
     slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=ref[0], keep_trajectory=True)
-    est, kf_ms = [], []
+    est, kf_ms, stages = [], [], []
     spent = 0.0
     for k, s in enumerate(log.scans):
         t0 = time.perf_counter()
@@ -78,6 +79,7 @@ def run_log(
         est.append(step.pose)
         if step.keyframe:
             kf_ms.append(step.timings_ms["total"])
+            stages.append(step.timings_ms)
         if progress:
             progress(k + 1, len(log.scans))
     stamps = np.array([s.stamp for s in log.scans])
@@ -106,6 +108,7 @@ def run_log(
         },
         online=np.array(est),
         final_map=final_map,
+        stage_ms=stages,
     )
 
 
@@ -134,7 +137,7 @@ def run_world(
     heading = math.atan2(route[1, 1] - route[0, 1], route[1, 0] - route[0, 0])
     start = (float(route[0, 0]), float(route[0, 1]), heading)
     total = route_length(route)
-    stamps, est, gt, odo, kf_ms = [], [], [], [], []
+    stamps, est, gt, odo, kf_ms, stages = [], [], [], [], [], []
     spent = 0.0
     with Simulation(world, cfg.sim, 1, start_poses=[start]) as sim:
         follower = PurePursuit(route, speed=speed_mps)
@@ -151,6 +154,7 @@ def run_world(
                 odo.append(compose(start, e.odom))  # in the map frame, for the baseline
                 if step.keyframe:
                     kf_ms.append(step.timings_ms["total"])
+                    stages.append(step.timings_ms)
             sim.set_cmd(0, *follower.command(sim.robots[0].pose))
             if progress:
                 progress(min(follower.progress, total), total)
@@ -181,7 +185,20 @@ def run_world(
         world,
         online=np.array(est),
         final_map=final_map,
+        stage_ms=stages,
     )
+
+
+def stage_percentiles(stage_ms: list[dict[str, float]]) -> dict[str, dict[str, float]]:
+    """{stage: {"p50": ms, "p95": ms}} over keyframes' ``SlamStep.timings_ms``."""
+    names = list(stage_ms[0]) if stage_ms else []
+    return {
+        k: {
+            "p50": float(np.median([t[k] for t in stage_ms])),
+            "p95": float(np.percentile([t[k] for t in stage_ms], 95)),
+        }
+        for k in names
+    }
 
 
 def metrics(run: SlamRun) -> dict:
@@ -214,6 +231,8 @@ def metrics(run: SlamRun) -> dict:
         "keyframes": run.slam.keyframes,
         "keyframe_p50_ms": float(np.nanmedian(kf)),
         "keyframe_p95_ms": float(np.nanpercentile(kf, 95)),
+        # where a keyframe's time goes: p50 and p95 of each stage of PolySlam.process
+        "keyframe_stage_ms": stage_percentiles(run.stage_ms),
         "realtime_factor": run.stream_s / run.processing_s if run.processing_s > 0 else math.inf,
         "degenerate_keyframes": run.slam.degenerate_keyframes,
         "rejected_keyframes": run.slam.rejected_keyframes,
