@@ -50,8 +50,13 @@ class LineFit:
 def _prefix_sums(p: np.ndarray) -> np.ndarray:
     """Cumulative (n, Sx, Sy, Sxx, Sxy, Syy) over points 0..i, shape (len, 6)."""
     x, y = p[:, 0], p[:, 1]
-    cols = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
-    return np.cumsum(cols, axis=0)
+    cols = np.empty((len(p), 6))
+    cols[:, 0] = 1.0
+    cols[:, 1:3] = p
+    cols[:, 3] = x * x
+    cols[:, 4] = x * y
+    cols[:, 5] = y * y
+    return np.cumsum(cols, axis=0, out=cols)
 
 
 def _pca_lines(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,7 +67,9 @@ def _pca_lines(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     cxy = S[:, 4] / n - mx * my
     cyy = S[:, 5] / n - my * my
     phi = 0.5 * np.arctan2(2 * cxy, cxx - cyy)  # direction of largest spread
-    normal = np.stack([-np.sin(phi), np.cos(phi)], axis=1)
+    normal = np.empty((len(phi), 2))
+    np.negative(np.sin(phi), out=normal[:, 0])
+    np.cos(phi, out=normal[:, 1])
     offset = normal[:, 0] * mx + normal[:, 1] * my
     return normal, offset
 
@@ -90,7 +97,8 @@ def _first_outlier(D: np.ndarray, limit: np.ndarray, threshold: float) -> np.nda
     out = far[:, :-1] | far[:, 1:]  # vector j is an outlier
     out[:, 0] = False  # the first vector always belongs to the chain
     out &= np.arange(out.shape[1])[None, :] < limit[:, None]
-    return np.where(out.any(axis=1), out.argmax(axis=1), limit)
+    first = out.argmax(axis=1)
+    return np.where(out[np.arange(len(out)), first], first, limit)
 
 
 def fit_first_line(pts: np.ndarray, cfg: RefineConfig) -> LineFit:
@@ -113,7 +121,7 @@ def _fit_prefixes(pts: np.ndarray, K: int, cfg: RefineConfig) -> LineFit:
     P = pts[: K + 1]
     S = _prefix_sums(P)
     k = np.arange(1, K + 1)  # prefix of k vectors = points 0..k
-    n1, d1 = _pca_lines(S[k])
+    n1, d1 = _pca_lines(S[1:])  # S[k]
     D1 = np.abs(n1 @ P.T - d1[:, None])  # (K, K+1): distance of every point to each L1
     f1 = _first_outlier(D1, k, cfg.inlier_threshold_m)  # C1 = vectors 0..f1-1
     n2, d2 = _pca_lines(S[f1])
