@@ -21,6 +21,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -31,7 +32,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from polyswarm.frontiers import FrontierSegment, extract_frontiers, points_along
-from polyswarm.navgraph import NavGraph, clear_of, node_of
+from polyswarm.navgraph import NavGraph, clear_of, node_of, nodes_of
 from polyswarm.polymap import GridPolyMap, VectorType
 
 GOAL_OFFSETS_M = (0.6, 1.0, 1.5, 0.35)  # goal candidates this far inside the free side
@@ -197,8 +198,8 @@ def _segment_facts(
             # clearance to obstacles only: the goal may be close to its frontier
             st, en, _ = pmap.vectors([VectorType.OBSTACLE], _near_cells(pmap, cells))
             ok[free] = clear_of(cands[free], st, en, radius)
-        for i in np.nonzero(ok)[0]:
-            node = node_of(pmap, *cands[i])
+        idx = np.nonzero(ok)[0]
+        for i, node in zip(idx.tolist(), nodes_of(pmap, cands[idx]), strict=True):
             if node is not None:
                 goals[owner[i]].append((cands[i], node))
     return [_SegmentFacts(bool(sl), tuple(g)) for sl, g in zip(slivers, goals, strict=True)]
@@ -207,24 +208,28 @@ def _segment_facts(
 def sliver_frontiers(pmap: GridPolyMap, segs: list[FrontierSegment]) -> np.ndarray:
     """Per segment: does explored space lie ``SLIVER_PROBE_M`` behind it along at least
     ``SLIVER_SHARE`` of its length?"""
-    pts, weights, owner = [], [], []
-    for k, s in enumerate(segs):
-        a, b = s.points[:-1], s.points[1:]
-        d = b - a
-        L = np.hypot(d[:, 0], d[:, 1])
-        ok = L > 1e-9
-        a, d, L = a[ok], d[ok], L[ok]
-        right = np.stack([d[:, 1], -d[:, 0]], axis=1) / L[:, None]  # the unexplored side
-        m = np.maximum(1, np.ceil(L / PROBE_SPACING_M)).astype(int)
-        v = np.repeat(np.arange(len(L)), m)
-        t = (np.arange(len(v)) - np.repeat(np.cumsum(m) - m, m) + 0.5) / m[v]
-        pts.append(a[v] + t[:, None] * d[v] + SLIVER_PROBE_M * right[v])
-        weights.append(L[v] / m[v])
-        owner.append(np.full(len(v), k))
-    pts_a = np.concatenate(pts).reshape(-1, 2)
-    w = np.concatenate(weights)
-    own = np.concatenate(owner).astype(int)
-    free = pmap.is_free_many(pts_a) if len(pts_a) else np.zeros(0, dtype=bool)
+    if not segs:
+        return np.zeros(0, dtype=bool)
+    # every segment's vectors at once (the pairs across two segments left out)
+    sizes = np.array([len(s.points) for s in segs])
+    pts = np.concatenate([s.points for s in segs])
+    seg_of = np.repeat(np.arange(len(segs)), sizes - 1)
+    last = np.cumsum(sizes) - 1
+    keep = np.ones(len(pts) - 1, dtype=bool)
+    keep[last[:-1]] = False
+    a = pts[:-1][keep]
+    d = (pts[1:] - pts[:-1])[keep]
+    L = np.hypot(d[:, 0], d[:, 1])
+    ok = L > 1e-9
+    a, d, L, seg_of = a[ok], d[ok], L[ok], seg_of[ok]
+    right = np.stack([d[:, 1], -d[:, 0]], axis=1) / L[:, None]  # the unexplored side
+    m = np.maximum(1, np.ceil(L / PROBE_SPACING_M)).astype(int)
+    v = np.repeat(np.arange(len(L)), m)
+    t = (np.arange(len(v)) - np.repeat(np.cumsum(m) - m, m) + 0.5) / m[v]
+    probes = a[v] + t[:, None] * d[v] + SLIVER_PROBE_M * right[v]
+    w = L[v] / m[v]
+    own = seg_of[v]
+    free = pmap.is_free_many(probes) if len(probes) else np.zeros(0, dtype=bool)
     total = np.bincount(own, weights=w, minlength=len(segs))
     behind = np.bincount(own, weights=w * free, minlength=len(segs))
     return behind >= SLIVER_SHARE * np.maximum(total, 1e-12)
@@ -302,26 +307,28 @@ class GraphIndex:
     def build(cls, graph: NavGraph) -> GraphIndex:
         nodes = [n for cg in graph.cells.values() for n in cg.nodes]
         index = {n: k for k, n in enumerate(nodes)}
-        rows, cols, w = [], [], []
-
-        def add(a, b, portal) -> None:
-            ia, ib = index.get(a), index.get(b)
-            if ia is None or ib is None:
-                return
-            m = portal.mid
-            d = float(np.hypot(*(graph.point(a) - m)) + np.hypot(*(m - graph.point(b))))
-            d = max(d, 1e-6)  # csgraph treats zero as "no edge"
-            rows.extend((ia, ib))
-            cols.extend((ib, ia))
-            w.extend((d, d))
-
-        for cg in graph.cells.values():
-            for (a, b), p in cg.internal.items():
-                add(a, b, p)
-        for edges in graph.borders.values():
-            for (a, b), p in edges.items():
-                add(a, b, p)
+        points = np.array([p for cg in graph.cells.values() for p in cg.nodes.values()])
+        # every edge (both ends known) with its portal's end points
+        edges = [
+            (ia, ib, p.a, p.b)
+            for group in (
+                *(cg.internal for cg in graph.cells.values()),
+                *graph.borders.values(),
+            )
+            for (a, b), p in group.items()
+            if (ia := index.get(a)) is not None and (ib := index.get(b)) is not None
+        ]
         n = len(nodes)
+        if not edges:
+            return cls(nodes, index, csr_matrix((n, n)))
+        ia, ib, pa, pb = zip(*edges, strict=True)
+        ia, ib = np.array(ia), np.array(ib)
+        m = 0.5 * (np.array(pa) + np.array(pb))  # metres via the opening's middle
+        d = np.hypot(*(points[ia] - m).T) + np.hypot(*(m - points[ib]).T)
+        d = np.maximum(d, 1e-6)  # csgraph treats zero as "no edge"
+        rows = np.stack([ia, ib], axis=1).ravel()
+        cols = np.stack([ib, ia], axis=1).ravel()
+        w = np.repeat(d, 2)
         return cls(nodes, index, csr_matrix((w, (rows, cols)), shape=(n, n)))
 
 
@@ -354,7 +361,11 @@ class Reach:
     def reaches(self, node) -> bool:
         """Can some robot reach this node?"""
         k = self.index.index.get(node)
-        return k is not None and len(self.dist) > 0 and bool(np.isfinite(self.dist[:, k]).any())
+        return k is not None and bool(self._reached[k])
+
+    @functools.cached_property
+    def _reached(self) -> np.ndarray:
+        return np.isfinite(self.dist).any(axis=0)  # (nodes,): some robot reaches it
 
     def costs(self, goals: list) -> np.ndarray:
         """(robots, goals) path lengths in metres (inf: unreachable)."""

@@ -51,32 +51,58 @@ def points_along(points: np.ndarray, distances: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(d, cum, points[:, 0]), np.interp(d, cum, points[:, 1])], axis=1)
 
 
+def _point_keys(q: np.ndarray) -> np.ndarray:
+    """One int64 per integer grid point (x in the high, y in the low 32 bits)."""
+    return (q[:, 0] << 32) + (q[:, 1] + (1 << 31))
+
+
 def chain_vectors(starts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
-    """Chain directed vectors end-to-start into polylines (index lists)."""
+    """Chain directed vectors end-to-start into polylines (index lists).
+
+    A vector's successor is the first unused vector (in index order) that starts on its
+    end point, else within one grid step of it (offsets tried in a fixed order)."""
     n = len(starts)
     if n == 0:
         return []
     qs = np.rint(starts * UNITS_PER_M).astype(np.int64)
     qe = np.rint(ends * UNITS_PER_M).astype(np.int64)
-    by_start: dict[tuple[int, int], list[int]] = {}
-    for k, (x, y) in enumerate(qs.tolist()):
-        by_start.setdefault((x, y), []).append(k)
+    keys = _point_keys(qs)
+    order = np.argsort(keys, kind="stable")  # equal keys stay in index order
+    sorted_keys = keys[order]
+    offsets = [(dx, dy) for dx in (0, -1, 1) for dy in (0, -1, 1)]
+    # every vector's first candidate while none is used, for all vectors at once
+    first = np.full(n, -1, dtype=np.int64)
+    me = np.arange(n)
+    for dx, dy in offsets:
+        q = _point_keys(qe + np.array([dx, dy]))
+        pos = np.searchsorted(sorted_keys, q)
+        for skip in (0, 1):  # the vector itself is not its successor: the next one there
+            at = np.minimum(pos + skip, n - 1)
+            cand = order[at]
+            take = (first < 0) & (pos + skip < n) & (sorted_keys[at] == q) & (cand != me)
+            first[take] = cand[take]
+    by_start: dict[tuple[int, int], list[int]] | None = None
 
     def successor(k: int, used: np.ndarray) -> int | None:
+        nonlocal by_start
+        j = int(first[k])
+        if j < 0:
+            return None
+        if not used[j]:
+            return j
+        if by_start is None:  # rare: the first candidate is taken; search them all
+            by_start = {}
+            for i, (x, y) in enumerate(qs.tolist()):
+                by_start.setdefault((x, y), []).append(i)
         x, y = qe[k]
-        for dx in (0, -1, 1):
-            for dy in (0, -1, 1):
-                for j in by_start.get((int(x + dx), int(y + dy)), ()):
-                    if not used[j] and j != k:
-                        return j
+        for dx, dy in offsets:
+            for i in by_start.get((int(x + dx), int(y + dy)), ()):
+                if not used[i] and i != k:
+                    return i
         return None
 
     has_pred = np.zeros(n, dtype=bool)
-    dummy = np.zeros(n, dtype=bool)
-    for k in range(n):
-        j = successor(k, dummy)
-        if j is not None:
-            has_pred[j] = True
+    has_pred[first[first >= 0]] = True
     used = np.zeros(n, dtype=bool)
     chains = []
     # open chains first (they start where no vector ends), then closed loops
@@ -94,18 +120,26 @@ def chain_vectors(starts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
 
 def split_polyline(points: np.ndarray, max_length: float) -> list[np.ndarray]:
     """Cut a polyline into pieces no longer than ``max_length`` (metres)."""
+    return [piece for piece, _ in _split(points, max_length)]
+
+
+def _split(points: np.ndarray, max_length: float) -> list[tuple[np.ndarray, float]]:
+    """``split_polyline`` with each piece's length (metres)."""
     seg = np.diff(points, axis=0)
-    total = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+    L = np.hypot(seg[:, 0], seg[:, 1])
+    total = float(L.sum())
     if total <= max_length or max_length <= 0:
-        return [points]
+        return [(points, total)]
     k = int(np.ceil(total / max_length))
     cuts = np.linspace(0.0, total, k + 1)
-    L = np.hypot(seg[:, 0], seg[:, 1])
     cum = np.concatenate([[0.0], np.cumsum(L)])
+    c = np.clip(cuts, 0.0, cum[-1])  # the cut points, as point_along finds them
+    at = np.stack([np.interp(c, cum, points[:, 0]), np.interp(c, cum, points[:, 1])], axis=1)
     out = []
-    for a, b in itertools.pairwise(cuts):
-        inner = points[(cum > a) & (cum < b)]
-        out.append(np.vstack([point_along(points, a), inner, point_along(points, b)]))
+    for m, (a, b) in enumerate(itertools.pairwise(cuts)):
+        piece = np.vstack([at[m], points[(cum > a) & (cum < b)], at[m + 1]])
+        d = np.diff(piece, axis=0)
+        out.append((piece, float(np.hypot(d[:, 0], d[:, 1]).sum())))
     return out
 
 
@@ -121,9 +155,7 @@ def extract_frontiers(
     out = []
     for n, chain in enumerate(chain_vectors(s, e)):
         pts = np.vstack([s[chain], e[chain[-1]][None, :]])
-        for piece in split_polyline(pts, max_length_m) if max_length_m > 0 else [pts]:
-            d = np.diff(piece, axis=0)
-            length = float(np.hypot(d[:, 0], d[:, 1]).sum())
+        for piece, length in _split(pts, max_length_m):
             if length >= min_length_m and length > 0:
                 out.append(FrontierSegment(piece, length, n))
     return out

@@ -377,6 +377,11 @@ def node_of(pmap: GridPolyMap, x: float, y: float) -> NodeId | None:
     return None if loc is None else (loc[0][0], loc[0][1], loc[1])
 
 
+def nodes_of(pmap: GridPolyMap, xy: np.ndarray) -> list[NodeId | None]:
+    """``node_of`` for many points at once."""
+    return [None if loc is None else (*loc[0], loc[1]) for loc in pmap.locate_many(xy)]
+
+
 def piece_polygon(pmap: GridPolyMap, node: NodeId) -> np.ndarray:
     return pmap.cells[(node[0], node[1])].partition.pieces[node[2]].xy
 

@@ -86,6 +86,24 @@ class CellPartition:
                 best, best_d = k, d
         return best if best_d <= PRECISION_M else None
 
+    def locate_many(self, xy: np.ndarray) -> np.ndarray:
+        """``locate`` for many points: each one's piece index, -1 for none."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        out = np.full(len(xy), -1, dtype=np.int64)
+        a, d, offsets = self._edges
+        if len(a) and len(xy):
+            x, y = xy[:, :1], xy[:, 1:]
+            cross = d[:, 0] * (y - a[:, 1]) - d[:, 1] * (x - a[:, 0])  # (points, vectors)
+            inside = np.minimum.reduceat(cross, offsets, axis=1) >= -1e-9
+            found = inside.any(axis=1)
+            out[found] = np.argmax(inside[found], axis=1)
+        else:
+            found = np.zeros(len(xy), dtype=bool)
+        for k in np.nonzero(~found)[0]:  # rare: on a shared vector, or outside
+            piece = self.locate(float(xy[k, 0]), float(xy[k, 1]))
+            out[k] = -1 if piece is None else piece
+        return out
+
     @cached_property
     def vectors(self) -> tuple[np.ndarray, ...]:
         """All pieces' vectors at once: (piece, start, end, type, link) arrays."""

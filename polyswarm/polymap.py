@@ -752,6 +752,24 @@ class GridPolyMap:
         piece = cell.partition.locate(x, y)
         return None if piece is None else (ix, piece)
 
+    def locate_many(self, xy: np.ndarray) -> list[tuple[CellIndex, int] | None]:
+        """``locate`` for many points at once."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        out: list[tuple[CellIndex, int] | None] = [None] * len(xy)
+        ij = np.floor(xy / self.cell_size).astype(np.int64)
+        keys, inv = np.unique(ij, axis=0, return_inverse=True)
+        inv = inv.ravel()
+        for k, (i, j) in enumerate(keys.tolist()):
+            cell = self.cells.get((i, j))
+            if cell is None:
+                continue
+            rows = np.nonzero(inv == k)[0]
+            pieces = cell.partition.locate_many(xy[rows]).tolist()
+            for r, piece in zip(rows.tolist(), pieces, strict=True):
+                if piece >= 0:
+                    out[r] = ((i, j), piece)
+        return out
+
     def vectors(
         self, kinds: Iterable[VectorType] | None = None, cells: Iterable[CellIndex] | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -76,3 +76,53 @@ def test_cached_targets_are_those_computed_afresh_and_follow_map_changes():
     assert len(second) == 2
     assert len({id(f) for f in cache.entries.values()} & kept) == 1
     assert min(t.frontier.points[:, 0].min() for t in second) < 9.0
+
+
+def _chains_by_search(starts: np.ndarray, ends: np.ndarray) -> list[list[int]]:
+    """The chaining rule written out plainly: a vector's successor is the first unused
+    vector (index order) starting on its end point, else within one grid step."""
+    from polyswarm.polymap import UNITS_PER_M
+
+    qs = np.rint(starts * UNITS_PER_M).astype(np.int64).tolist()
+    qe = np.rint(ends * UNITS_PER_M).astype(np.int64).tolist()
+    n = len(qs)
+
+    def successor(k, used):
+        for dx in (0, -1, 1):
+            for dy in (0, -1, 1):
+                for j in range(n):
+                    if not used[j] and j != k and qs[j] == [qe[k][0] + dx, qe[k][1] + dy]:
+                        return j
+        return None
+
+    none = [False] * n
+    has_pred = [False] * n
+    for k in range(n):
+        if (j := successor(k, none)) is not None:
+            has_pred[j] = True
+    used, chains = [False] * n, []
+    for k in [k for k in range(n) if not has_pred[k]] + list(range(n)):
+        if used[k]:
+            continue
+        chain, used[k] = [k], True
+        while (j := successor(chain[-1], used)) is not None:
+            chain.append(j)
+            used[j] = True
+        chains.append(chain)
+    return chains
+
+
+def test_chain_vectors_follows_the_rule_with_shared_and_nearly_shared_points():
+    from polyswarm.frontiers import chain_vectors
+
+    rng = np.random.default_rng(11)
+    for _ in range(30):
+        # a few points on a coarse lattice, so that many vectors share start points (a
+        # frontier vertex where several chains meet), some moved by one grid step
+        lattice = rng.integers(-3, 4, (12, 2)) * 0.5
+        pick = rng.integers(0, len(lattice), (40, 2))
+        s, e = lattice[pick[:, 0]].copy(), lattice[pick[:, 1]].copy()
+        s[rng.random(40) < 0.2] += 1e-5 * rng.choice([-1, 1], 2)
+        got = [c.tolist() for c in chain_vectors(s, e)]
+        assert got == _chains_by_search(s, e)
+        assert sorted(k for c in got for k in c) == list(range(40))  # each vector once

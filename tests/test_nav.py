@@ -144,3 +144,24 @@ def test_every_path_keeps_the_radius_from_every_obstacle(room, seed):
         if len(inner) > 3:
             assert path_clearance(inner[1:-1], s, e) >= R - 1e-6
         assert pmap.is_free_many(inner).all()
+
+
+def test_graph_index_weights_are_path_lengths_through_the_portals():
+    from polyswarm.explore import GraphIndex
+
+    # an L-shaped corridor: several pieces and cells, so internal and border edges
+    ring = Ring([(0.1, 0.1), (5.9, 0.1), (5.9, 1.9), (1.9, 1.9), (1.9, 5.9), (0.1, 5.9)], [O] * 6)
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(ring)).map
+    graph = NavGraph.build(pmap, 0.3)
+    index = GraphIndex.build(graph)
+    edges = [
+        *((e, p) for cg in graph.cells.values() for e, p in cg.internal.items()),
+        *((e, p) for b in graph.borders.values() for e, p in b.items()),
+    ]
+    assert edges and index.matrix.nnz == 2 * len(edges)
+    for (a, b), portal in edges:
+        m = 0.5 * (portal.a + portal.b)
+        want = np.hypot(*(graph.point(a) - m)) + np.hypot(*(m - graph.point(b)))
+        ia, ib = index.index[a], index.index[b]
+        assert index.matrix[ia, ib] == pytest.approx(want)
+        assert index.matrix[ib, ia] == pytest.approx(want)

@@ -63,3 +63,24 @@ def test_locate_on_a_shared_split_finds_a_piece():
     pmap = GridPolyMap(2.0).merge(rect(0.5, 0.5, 3.5, 1.5)).map
     # x = 2.0 is the cell border: either cell may answer, but one must
     assert pmap.locate(2.0, 1.0) is not None
+
+
+def test_locate_many_answers_as_locate_does_point_by_point():
+    # random cells (pieces, holes, shared splits) and points inside, outside, on
+    # vectors and on cell borders: the batched lookup is the one-point lookup
+    rng = np.random.default_rng(7)
+    pmap = GridPolyMap(2.0)
+    for _ in range(12):
+        c = rng.uniform(-3, 3, 2)
+        a = np.sort(rng.uniform(0, 2 * np.pi, 24))
+        r = rng.uniform(0.5, 3.0, 24)
+        xy = c + np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+        pmap = pmap.merge(TypedPolygon(Ring(xy, rng.integers(0, 2, 24)))).map
+    pts = [rng.uniform(-6, 6, (400, 2)), np.array([[0.0, 0.0], [2.0, 1.0], [-2.0, -2.0]])]
+    for cell in pmap.cells.values():  # points on the pieces' own vertices and edges
+        for p in cell.partition.pieces:
+            pts.append(p.xy)
+            pts.append(0.5 * (p.xy + np.roll(p.xy, -1, axis=0)))
+    pts = np.concatenate(pts)
+    assert pmap.locate_many(pts) == [pmap.locate(x, y) for x, y in pts]
+    assert pmap.locate_many(np.zeros((0, 2))) == []
