@@ -733,15 +733,23 @@ class GridPolyMap:
     def is_free_many(self, xy: np.ndarray) -> np.ndarray:
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         out = np.zeros(len(xy), dtype=bool)
+        for (i, j), rows in self._by_cell(xy):
+            cell = self.cells.get((i, j))
+            if cell is not None:
+                out[rows] = shapely.intersects_xy(cell.region, xy[rows, 0], xy[rows, 1])
+        return out
+
+    def _by_cell(self, xy: np.ndarray) -> list[tuple[CellIndex, np.ndarray]]:
+        """The points' rows grouped by the cell holding them."""
+        if len(xy) == 0:
+            return []
         ij = np.floor(xy / self.cell_size).astype(np.int64)
         keys, inv = np.unique(ij, axis=0, return_inverse=True)
-        for k, (i, j) in enumerate(keys):
-            cell = self.cells.get((int(i), int(j)))
-            if cell is None:
-                continue
-            m = inv.ravel() == k
-            out[m] = shapely.intersects_xy(cell.region, xy[m, 0], xy[m, 1])
-        return out
+        inv = inv.ravel()
+        order = np.argsort(inv, kind="stable")
+        ends = np.cumsum(np.bincount(inv, minlength=len(keys)))
+        groups = np.split(order, ends[:-1])
+        return list(zip(map(tuple, keys.tolist()), groups, strict=True))
 
     def locate(self, x: float, y: float) -> tuple[CellIndex, int] | None:
         """The cell and the index of the convex piece holding the point, or None."""
@@ -756,18 +764,14 @@ class GridPolyMap:
         """``locate`` for many points at once."""
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         out: list[tuple[CellIndex, int] | None] = [None] * len(xy)
-        ij = np.floor(xy / self.cell_size).astype(np.int64)
-        keys, inv = np.unique(ij, axis=0, return_inverse=True)
-        inv = inv.ravel()
-        for k, (i, j) in enumerate(keys.tolist()):
-            cell = self.cells.get((i, j))
+        for ij, rows in self._by_cell(xy):
+            cell = self.cells.get(ij)
             if cell is None:
                 continue
-            rows = np.nonzero(inv == k)[0]
             pieces = cell.partition.locate_many(xy[rows]).tolist()
             for r, piece in zip(rows.tolist(), pieces, strict=True):
                 if piece >= 0:
-                    out[r] = ((i, j), piece)
+                    out[r] = (ij, piece)
         return out
 
     def vectors(

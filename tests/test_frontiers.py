@@ -51,10 +51,13 @@ def test_a_frontier_facing_a_sliver_of_unexplored_space_is_no_target():
     assert frontier_targets(pmap, graph, 0.4, 4.0) == []  # ... but neither is a target
 
 
-def test_cached_targets_are_those_computed_afresh_and_follow_map_changes():
-    # two rooms 8 m apart, each with an open side; the second room then grows
+def test_cached_targets_are_those_computed_afresh_and_follow_map_changes(monkeypatch):
+    import polyswarm.explore
+
+    monkeypatch.setattr(polyswarm.explore, "GAIN_WEIGHT", 1.0)  # the area is cached too
+    # two rooms 12 m apart, each with an open side; the second room then grows
     left = rect(0.2, 0.2, 3.8, 3.8, (O, F, O, O))
-    right = rect(10.2, 0.2, 13.8, 3.8, (O, O, O, F))
+    right = rect(14.2, 0.2, 17.8, 3.8, (O, O, O, F))
     pmap = GridPolyMap(2.0).merge(left).map.merge(right).map
     cache = TargetCache()
 
@@ -63,6 +66,7 @@ def test_cached_targets_are_those_computed_afresh_and_follow_map_changes():
         cached = frontier_targets(pmap, graph, 0.4, 4.0, cache=cache)
         fresh = frontier_targets(pmap, graph, 0.4, 4.0)
         assert [t.goal.tolist() for t in cached] == [t.goal.tolist() for t in fresh]
+        assert [t.utility_m for t in cached] == [t.utility_m for t in fresh]
         return cached
 
     first = both(pmap)
@@ -71,11 +75,13 @@ def test_cached_targets_are_those_computed_afresh_and_follow_map_changes():
     assert len(both(pmap)) == 2  # nothing changed: every fact reused
     assert {id(f) for f in cache.entries.values()} == kept
     # the right room opens towards the left one: its frontier moves, the other stays
-    pmap = pmap.merge(rect(8.2, 0.2, 10.4, 3.8, (O, O, O, F))).map
+    pmap = pmap.merge(rect(12.2, 0.2, 14.4, 3.8, (O, O, O, F))).map
     second = both(pmap)
     assert len(second) == 2
     assert len({id(f) for f in cache.entries.values()} & kept) == 1
-    assert min(t.frontier.points[:, 0].min() for t in second) < 9.0
+    assert min(t.frontier.points[:, 0].min() for t in second) < 13.0
+    # each open side looks onto a whole half disc of unexplored space
+    assert all(t.utility_m > 3.6 + 10.0 for t in second)
 
 
 def _chains_by_search(starts: np.ndarray, ends: np.ndarray) -> list[list[int]]:
@@ -126,3 +132,24 @@ def test_chain_vectors_follows_the_rule_with_shared_and_nearly_shared_points():
         got = [c.tolist() for c in chain_vectors(s, e)]
         assert got == _chains_by_search(s, e)
         assert sorted(k for c in got for k in c) == list(range(40))  # each vector once
+
+
+def test_unexplored_area_behind_a_frontier():
+    from polyswarm.explore import GAIN_RADIUS_M, unexplored_behind
+
+    half_disc = 0.5 * np.pi * GAIN_RADIUS_M**2
+    # a room whose top is open onto unexplored space: a whole half disc behind it
+    room = rect(0.2, 0.2, 3.8, 1.9, (O, O, F, O))
+    pmap = GridPolyMap(2.0).merge(room).map
+    (seg,) = extract_frontiers(pmap, 0.4, 4.0)
+    assert unexplored_behind(pmap, [seg])[0] == pytest.approx(half_disc)
+    # explored space 10 cm behind it (a sliver between two fans): almost nothing
+    sliver = pmap.merge(rect(0.2, 2.0, 3.8, 3.8, (F, O, O, O))).map
+    segs = extract_frontiers(sliver, 0.4, 4.0)
+    assert (unexplored_behind(sliver, segs) < 0.02 * half_disc).all()
+    # a mapped wall 1 m behind it hides what lies beyond: less than the open half disc,
+    # more than the 1 m x 3.6 m strip straight in front
+    walled = pmap.merge(rect(-2.0, 2.9, 6.0, 4.0, (O, O, O, O))).map
+    (seg,) = extract_frontiers(walled, 0.4, 4.0)
+    area = unexplored_behind(walled, [seg])[0]
+    assert 3.6 < area < 0.5 * half_disc
