@@ -79,7 +79,11 @@ def test_frozen_agent_is_lost_after_the_lease_and_taken_back(tmp_path):
     assert_nothing_lost(out)
 
 
-@pytest.mark.parametrize("faults", ["drop=0.1,dup=0.05,reorder=0.05,seed=3"])
+# A run to 95 % of the rooms world takes about 35 map messages to the coordinator: with
+# one in five lost and one in twenty held back, the chance that none of them is (and
+# nothing needs healing) is 0.75^35 = 4e-5. At drop=0.1 it was 0.85^35 = 3e-3, and it
+# happened once in a full test run.
+@pytest.mark.parametrize("faults", ["drop=0.2,dup=0.05,reorder=0.05,seed=3"])
 def test_message_loss_duplication_and_reordering_heal_by_resync(tmp_path, faults):
     m, out = launch(tmp_path, "--link-faults", faults)
     assert completed(m) and m["crashed_processes"] == []
