@@ -47,16 +47,20 @@ def test_room_with_a_pillar():
     assert part.locate(0.5, 0.5) is not None
 
 
-def test_random_cells_partition_exactly():
-    rng = np.random.default_rng(3)
+def random_map(rng: np.random.Generator, polygons: int, vertices: int) -> GridPolyMap:
+    """Star-shaped random polygons (random vector types) merged around the origin."""
     pmap = GridPolyMap(2.0)
-    for _ in range(20):
+    for _ in range(polygons):
         c = rng.uniform(-3, 3, 2)
-        a = np.sort(rng.uniform(0, 2 * np.pi, 30))
-        r = rng.uniform(0.5, 3.0, 30)
+        a = np.sort(rng.uniform(0, 2 * np.pi, vertices))
+        r = rng.uniform(0.5, 3.0, vertices)
         xy = c + np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
-        pmap = pmap.merge(TypedPolygon(Ring(xy, rng.integers(0, 2, 30)))).map
-    check(pmap)
+        pmap = pmap.merge(TypedPolygon(Ring(xy, rng.integers(0, 2, vertices)))).map
+    return pmap
+
+
+def test_random_cells_partition_exactly():
+    check(random_map(np.random.default_rng(3), 20, 30))
 
 
 def test_locate_on_a_shared_split_finds_a_piece():
@@ -69,13 +73,7 @@ def test_locate_many_answers_as_locate_does_point_by_point():
     # random cells (pieces, holes, shared splits) and points inside, outside, on
     # vectors and on cell borders: the batched lookup is the one-point lookup
     rng = np.random.default_rng(7)
-    pmap = GridPolyMap(2.0)
-    for _ in range(12):
-        c = rng.uniform(-3, 3, 2)
-        a = np.sort(rng.uniform(0, 2 * np.pi, 24))
-        r = rng.uniform(0.5, 3.0, 24)
-        xy = c + np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
-        pmap = pmap.merge(TypedPolygon(Ring(xy, rng.integers(0, 2, 24)))).map
+    pmap = random_map(rng, 12, 24)
     pts = [rng.uniform(-6, 6, (400, 2)), np.array([[0.0, 0.0], [2.0, 1.0], [-2.0, -2.0]])]
     for cell in pmap.cells.values():  # points on the pieces' own vertices and edges
         for p in cell.partition.pieces:
