@@ -7,8 +7,9 @@ Zenoh) for each seed in the range and each weight of ``polyswarm.explore.GAIN_WE
 (metres of path per m2 of unexplored area behind a frontier; default "0,1": the
 length alone, then with the area), two runs at a time, and prints the simulated
 seconds to 99 % of the free space. In one process the runs are deterministic, so two
-weights compare seed by seed; the README's comparison table was made this way (a
-3-robot maze run takes about 10 minutes of wall time here).
+weights compare seed by seed. The README's comparison table came from a copy of this
+script that also logged targets and assignments. A 3-robot maze run takes about 10
+minutes of wall time here.
 """
 
 from __future__ import annotations
