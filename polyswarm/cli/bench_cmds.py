@@ -277,8 +277,9 @@ def bench_explore(
             if row is None:
                 status.update(f"run {k + 1}/{n}: {what}")
             else:
+                t99 = "never" if row["t99_s"] is None else f"{row['t99_s']:.1f} s"
                 console.log(
-                    f"{what}: t99 {row['t99_s']} s, coverage {row['final_coverage']:.3f}, "
+                    f"{what}: t99 {t99}, coverage {row['final_coverage']:.3f}, "
                     f"wall {row['wall_time_s']:.0f} s"
                 )
 
