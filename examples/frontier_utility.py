@@ -57,9 +57,9 @@ def main(
     for w, r in sorted({res[0] for res in results}):
         rows = sorted((s, t) for key, s, t in results if key == (w, r))
         done = [t for _, t in rows if t is not None]
-        per_seed = ", ".join("never" if t is None else f"{t:.0f}" for _, t in rows)
+        per_seed = ", ".join("never" if t is None else f"{t:.0f} s" for _, t in rows)
         median = f"{np.median(done):.0f} s" if len(done) == len(rows) else "-"
-        print(f"GAIN_WEIGHT {w:g}, GAIN_RADIUS_M {r:g}: t99 {per_seed} s (median {median})")
+        print(f"GAIN_WEIGHT {w:g}, GAIN_RADIUS_M {r:g}: t99 {per_seed} (median {median})")
 
 
 if __name__ == "__main__":
