@@ -36,6 +36,7 @@ from scipy.sparse.csgraph import dijkstra
 from polyswarm.frontiers import FrontierSegment, extract_frontiers, points_along
 from polyswarm.navgraph import NavGraph, clear_of, node_of, nodes_of
 from polyswarm.polymap import GridPolyMap, VectorType
+from polyswarm.raycast import cast_rays
 
 GOAL_OFFSETS_M = (0.6, 1.0, 1.5, 0.35)  # goal candidates this far inside the free side
 GOAL_ALONG = (0.5, 0.25, 0.75)  # ... at these fractions along the frontier
@@ -260,16 +261,12 @@ def unexplored_behind(pmap: GridPolyMap, segs: list[FrontierSegment]) -> np.ndar
         return out
     mids = np.array([s.midpoint for s in segs])
     chord = np.array([s.end - s.start for s in segs])
-    norm = np.hypot(chord[:, 0], chord[:, 1])
-    ok = norm > 1e-9
-    right = np.zeros_like(chord)
-    right[ok] = np.stack([chord[ok, 1], -chord[ok, 0]], axis=1) / norm[ok, None]
-    # ray directions: the unexplored side's normal turned by angles within the half disc
-    ang = np.linspace(-0.45 * math.pi, 0.45 * math.pi, GAIN_RAYS)
-    cos, sin = np.cos(ang)[None, :], np.sin(ang)[None, :]
-    dirs = np.stack(
-        [cos * right[:, :1] - sin * right[:, 1:], sin * right[:, :1] + cos * right[:, 1:]], axis=2
-    )  # (segments, rays, 2)
+    ok = np.hypot(chord[:, 0], chord[:, 1]) > 1e-9
+    # ray angles: the unexplored side's normal (chord turned right), turned by angles
+    # within the half disc
+    spread = np.linspace(-0.45 * math.pi, 0.45 * math.pi, GAIN_RAYS)
+    angles = (np.arctan2(chord[:, 1], chord[:, 0]) - 0.5 * math.pi)[:, None] + spread
+    dirs = np.stack([np.cos(angles), np.sin(angles)], axis=2)  # (segments, rays, 2)
     r = (np.arange(GAIN_STEPS) + 0.5) / GAIN_STEPS * GAIN_RADIUS_M
     samples = mids[:, None, None, :] + r[None, None, :, None] * dirs[:, :, None, :]
     unknown = ~pmap.is_free_many(samples.reshape(-1, 2)).reshape(len(segs), GAIN_RAYS, GAIN_STEPS)
@@ -277,32 +274,16 @@ def unexplored_behind(pmap: GridPolyMap, segs: list[FrontierSegment]) -> np.ndar
         [VectorType.OBSTACLE],
         {c for m in mids for c in pmap.cells_within(m[0], m[1], GAIN_RADIUS_M)},
     )
+    # the first obstacle along each ray
     hit = np.full((len(segs), GAIN_RAYS), np.inf)
     if len(st):
-        for k in np.nonzero(ok)[0]:  # first obstacle along each ray (obstacles nearby)
-            near = np.minimum(
-                np.hypot(*(st - mids[k]).T), np.hypot(*(en - mids[k]).T)
-            ) <= GAIN_RADIUS_M + np.hypot(*(en - st).T)
-            if near.any():
-                hit[k] = _ray_hits(mids[k], dirs[k], st[near], en[near])
+        for k in np.nonzero(ok)[0]:
+            hit[k] = cast_rays(mids[k], angles[k], st, en, GAIN_RADIUS_M)
     seen = unknown & (r[None, None, :] < hit[:, :, None])
     w = r / r.sum()  # samples farther out stand for more area
     half_disc = 0.5 * math.pi * GAIN_RADIUS_M**2
     out[ok] = ((seen * w).sum(axis=2).mean(axis=1) * half_disc)[ok]
     return out
-
-
-def _ray_hits(p: np.ndarray, u: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Per ray (origin p, unit directions u (rays, 2)): distance to the first of the
-    segments a-b it crosses (inf: none)."""
-    d = b - a  # (segments, 2)
-    ap = a - p
-    den = u[:, None, 0] * d[None, :, 1] - u[:, None, 1] * d[None, :, 0]  # (rays, segments)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (ap[None, :, 0] * d[None, :, 1] - ap[None, :, 1] * d[None, :, 0]) / den
-        s = (ap[None, :, 0] * u[:, None, 1] - ap[None, :, 1] * u[:, None, 0]) / den
-    crosses = (np.abs(den) > 1e-12) & (t > 0) & (s >= 0) & (s <= 1)
-    return np.where(crosses, t, np.inf).min(axis=1)
 
 
 def sliver_frontiers(pmap: GridPolyMap, segs: list[FrontierSegment]) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""A pure 2D ray caster against line segments (for tests, benchmarks and log tools).
+"""A pure 2D ray caster against line segments (for tests, benchmarks, log tools, and the
+coordinator's estimate of the unexplored area behind a frontier).
 
 Typical use::
 
