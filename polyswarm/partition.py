@@ -16,6 +16,8 @@ border line, which is known exactly from the cell index (the hyperplane of Algor
 
 from __future__ import annotations
 
+import itertools
+import logging
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -24,6 +26,8 @@ import numpy as np
 import shapely
 
 from polyswarm.polymap import PRECISION_M, UNITS_PER_M, Cell, VectorType
+
+log = logging.getLogger(__name__)
 
 NO_LINK = -1
 
@@ -263,28 +267,54 @@ def _partition_polygon(rings, offset: int) -> list[Piece]:
 
     roots = sorted({find(t) for t in range(len(tri))})
     local = {r: offset + k for k, r in enumerate(roots)}
+    along = {a: b for a, b in boundary}  # boundary vertex -> the next one on its ring
     pieces = []
     for r in roots:
         start = min(nxt[r])
         cyc = [start]
         while (w := nxt[r][cyc[-1]]) != start:
             cyc.append(w)
-        ety, links = [], []
+        verts, ety, links = [], [], []
         for a, b in zip(cyc, cyc[1:] + cyc[:1], strict=True):
             if (a, b) in boundary:
+                verts.append(a)
                 ety.append(boundary[(a, b)])
                 links.append(NO_LINK)
             elif (b, a) in owner:  # an internal split: the piece across owns the reverse
+                verts.append(a)
                 ety.append(int(VectorType.SECTOR))
                 links.append(local[find(owner[(b, a)])])
-            else:  # pragma: no cover - a degenerate sliver edge: bounds explored space
+            elif (chain := _boundary_chain(along, a, b)) is not None:
+                # collinear boundary vertices whose zero-area triangles the triangulation
+                # left out: the vectors between them keep their own types
+                for u, v in itertools.pairwise(chain):
+                    verts.append(u)
+                    ety.append(boundary[(u, v)])
+                    links.append(NO_LINK)
+            else:  # a degenerate sliver edge: it bounds explored space
+                log.warning("partition: edge %s-%s is neither boundary nor split", a, b)
+                verts.append(a)
                 ety.append(int(VectorType.FRONTIER))
                 links.append(NO_LINK)
         pieces.append(
             Piece(
-                xy=xy[cyc].copy(),
+                xy=xy[verts].copy(),
                 types=np.array(ety, dtype=np.uint8),
                 links=np.array(links, dtype=np.int64),
             )
         )
     return pieces
+
+
+MAX_CHAIN = 64  # collinear boundary vertices looked for along one piece edge
+
+
+def _boundary_chain(along: dict[int, int], a: int, b: int) -> list[int] | None:
+    """Boundary vertices from a to b following the rings (a, ..., b), or None."""
+    chain = [a]
+    while chain[-1] != b and len(chain) <= MAX_CHAIN:
+        w = along.get(chain[-1])
+        if w is None:
+            return None
+        chain.append(w)
+    return chain if chain[-1] == b else None

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
+from polyswarm.polymap import Cell, GridPolyMap, Ring, TypedPolygon, VectorType
 from tests.conftest import O, rect
 
 
@@ -82,3 +82,43 @@ def test_locate_many_answers_as_locate_does_point_by_point():
     pts = np.concatenate(pts)
     assert pmap.locate_many(pts) == [pmap.locate(x, y) for x, y in pts]
     assert pmap.locate_many(np.zeros((0, 2))) == []
+
+
+def test_a_collinear_vertex_the_triangulation_skips_keeps_its_types():
+    # cell (0, 0) of an in-process run on the rooms world (1 robot, seed 2): a 1 mm
+    # frontier vector on the east border, then the border's sector vector, collinear.
+    # The triangulation left out the zero-area triangle there, so one piece's edge ran
+    # along both; it was typed frontier, the cell had no opening to its neighbours, and
+    # the robot standing in it could reach nothing (the mission ended at 43 %)
+    F, S = VectorType.FRONTIER, VectorType.SECTOR
+    shell = Ring(
+        [
+            (0.099, 0.097),
+            (0.88671, 0.09962),
+            (0.886, 0.098),
+            (2.0, 0.09818),
+            (2.0, 0.09911),
+            (2.0, 2.0),
+            (0.09958, 2.0),
+            (0.099, 2.0),
+        ],
+        [O, F, O, F, S, S, F, O],
+    )
+    hole = Ring(
+        [(1.49847, 1.49847), (1.49884, 1.49909), (1.49919, 1.49936), (1.4992, 1.49936)],
+        [F] * 4,
+    )
+    cell = Cell((0, 0), 2.0, (TypedPolygon(shell, (hole,)),))
+    pieces = cell.partition.pieces
+    assert sum(p.area for p in pieces) == pytest.approx(cell.area, abs=1e-9)
+    # the east (x = 2) and north (y = 2) borders: sector along their whole length
+    # but the mapped millimetre of frontier
+    for axis in (0, 1):
+        length = {F: 0.0, S: 0.0}
+        for p in pieces:
+            nxt = np.roll(p.xy, -1, axis=0)
+            on = (np.abs(p.xy[:, axis] - 2.0) < 1e-9) & (np.abs(nxt[:, axis] - 2.0) < 1e-9)
+            for k in np.nonzero(on)[0]:
+                length[VectorType(p.types[k])] += float(np.hypot(*(nxt[k] - p.xy[k])))
+        assert length[S] == pytest.approx(2.0 - (0.09911 if axis == 0 else 0.09958), abs=1e-9)
+        assert length[F] == pytest.approx(0.00093 if axis == 0 else 0.09958 - 0.099, abs=1e-9)
