@@ -117,10 +117,9 @@ class Coordinator:
     def __init__(self, cfg: Config, robots: dict[str, tuple[float, float, float]]) -> None:
         self.cfg = cfg
         self.strategy = Strategy(cfg.explore.strategy)
-        self.radius = cfg.nav.robot_radius_m + cfg.nav.clearance_margin_m
         self.robots = {rid: RobotInfo(rid, np.array(p, dtype=float)) for rid, p in robots.items()}
         self.merged = GridPolyMap(cfg.map.cell_size_m)
-        self.graph = NavGraph(self.radius, cfg.map.cell_size_m)
+        self.graph = NavGraph.for_robot(self.merged, cfg.nav)
         self._index: GraphIndex | None = None  # the graph as a matrix, until it changes
         # a wall seen at a grazing angle by one robot (a chord of frontier vectors just
         # behind it) and head-on by another (an obstacle a centimetre in front) is a wall:
@@ -172,7 +171,7 @@ class Coordinator:
             if abs(merged.cell_size - self.merged.cell_size) > 1e-9:
                 raise MapError("persisted merged map has another cell size than the config")
             self.merged = merged
-            self.graph = NavGraph.build(merged, self.radius)
+            self.graph = NavGraph.for_robot(merged, self.cfg.nav)
             self._index = None
         for rid, pmap in robot_maps.items():
             self.robot(rid).map = pmap

@@ -116,7 +116,7 @@ class RobotAgent:
         self.cfg = cfg
         self.start_pose = np.array(start_pose, dtype=float)
         self.slam = PolySlam(cfg.slam, cfg.map.cell_size_m, self.start_pose)
-        self.radius = cfg.nav.robot_radius_m + cfg.nav.clearance_margin_m
+        self.radius = cfg.nav.obstacle_clearance_m
         rc = cfg.sim.robot
         self.follower = PathFollower(
             ControlParams(
@@ -223,7 +223,7 @@ class RobotAgent:
     def on_merged_map(self, pmap: GridPolyMap) -> None:
         """A full merged map (first contact or resync)."""
         self.merged = pmap
-        self.merged_graph = NavGraph.build(pmap, self.radius)
+        self.merged_graph = NavGraph.for_robot(pmap, self.cfg.nav)
 
     def on_merged_delta(self, delta: MapDelta) -> None:
         """Raises DeltaGapError when a delta was missed (fetch the full map)."""
@@ -435,7 +435,7 @@ class RobotAgent:
             return self.merged, self.merged_graph
         own = self.slam.map
         if self.own_graph is None or self._own_graph_version != own.version:
-            self.own_graph = NavGraph.build(own, self.radius)
+            self.own_graph = NavGraph.for_robot(own, self.cfg.nav)
             self._own_graph_version = own.version
         return own, self.own_graph
 
@@ -447,7 +447,10 @@ class RobotAgent:
         pmap, graph = self._planning_map()
         self.stats.plans += 1
         try:
-            path = Planner(pmap, graph).plan(self.pose[:2], np.array(a.goal))
+            # a frontier's goal past a cut in the free space (a frontier just beyond a
+            # narrow door): drive as close as the map lets and look from there
+            explore = a.kind == AssignmentKind.EXPLORE
+            path = Planner(pmap, graph).plan(self.pose[:2], np.array(a.goal), partial=explore)
         except PlanningError as e:
             self.stats.plan_failures += 1
             self.follower.set_path(None)
@@ -466,7 +469,8 @@ class RobotAgent:
         if first or self.state not in (RobotState.NAVIGATING,):
             self._best_remaining = math.inf
             self._progress_t = now_s
-        self._set_state(RobotState.NAVIGATING, f"{path.length_m:.1f} m to go")
+        short = "" if path.reaches_goal else ", as close as the map lets"
+        self._set_state(RobotState.NAVIGATING, f"{path.length_m:.1f} m to go{short}")
 
     def _track(self, follow: Follow, now_s: float) -> None:
         if self.assignment is None or self.follower.path is None:

@@ -208,6 +208,26 @@ class NavConfig:
     # (about 3 cm, bench slam) and leaves the local controller (which keeps the radius
     # plus ControlParams.safety_margin_m from scan points) room to follow the path
     clearance_margin_m: float = 0.1
+    # distance the planned path keeps from frontier vectors (the edge of explored space),
+    # 0 to robot_radius_m + clearance_margin_m. Beyond a frontier nothing is known, not a
+    # wall; the local controller keeps its distance from whatever the live scan shows
+    # there. With the full clearance, a door seen at an angle let no robot in (see
+    # polyswarm.navgraph)
+    frontier_clearance_m: float = 0.1
+    # where nothing wider leads on (a door 0.7 m wide for a 0.4 m robot), the path may keep
+    # only this much beyond the radius from mapped obstacles: the map's wall error. Such
+    # tight passages cost navgraph.TIGHT_PENALTY_M more, so wider ways are preferred
+    tight_margin_m: float = 0.03
+
+    @property
+    def obstacle_clearance_m(self) -> float:
+        """Distance the planned path keeps from obstacle vectors."""
+        return self.robot_radius_m + self.clearance_margin_m
+
+    @property
+    def tight_clearance_m(self) -> float:
+        """... and in a tight passage."""
+        return self.robot_radius_m + self.tight_margin_m
 
 
 @dataclass(frozen=True)
@@ -434,6 +454,16 @@ def validate(cfg: Config) -> None:
     for name in ("frontier_range_m", "no_return_free_m"):
         if not (0.0 < getattr(cfg.slam, name) <= 100.0):
             raise ConfigError(f"slam.{name} must be 0-100 m (not 0)")
+    nav = cfg.nav
+    if nav.robot_radius_m <= 0 or not (0 <= nav.tight_margin_m <= nav.clearance_margin_m):
+        raise ConfigError(
+            "nav: robot_radius_m must be positive and 0 <= tight_margin_m <= clearance_margin_m"
+        )
+    if not (0.0 <= nav.frontier_clearance_m <= nav.obstacle_clearance_m):
+        raise ConfigError(
+            "nav.frontier_clearance_m must be 0 to robot_radius_m + clearance_margin_m "
+            f"({nav.obstacle_clearance_m:g} m), got {nav.frontier_clearance_m}"
+        )
     if cfg.sim.raycast_threads < 0:
         raise ConfigError("sim.raycast_threads must be 0 (every core) or a thread count")
     for name in ("blacklist_after_failures", "blacklist_after_looks"):

@@ -34,7 +34,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from polyswarm.frontiers import FrontierSegment, extract_frontiers, points_along
-from polyswarm.navgraph import NavGraph, clear_of, node_of, nodes_of
+from polyswarm.navgraph import TIGHT_PENALTY_M, NavGraph, clear_of, node_of, nodes_of
 from polyswarm.polymap import GridPolyMap, VectorType
 from polyswarm.raycast import cast_rays
 
@@ -391,7 +391,7 @@ class GraphIndex:
         points = np.array([p for cg in graph.cells.values() for p in cg.nodes.values()])
         # every edge (both ends known) with its portal's end points
         edges = [
-            (ia, ib, p.a, p.b)
+            (ia, ib, p.a, p.b, p.tight)
             for group in (
                 *(cg.internal for cg in graph.cells.values()),
                 *graph.borders.values(),
@@ -402,10 +402,11 @@ class GraphIndex:
         n = len(nodes)
         if not edges:
             return cls(nodes, index, csr_matrix((n, n)))
-        ia, ib, pa, pb = zip(*edges, strict=True)
+        ia, ib, pa, pb, tight = zip(*edges, strict=True)
         ia, ib = np.array(ia), np.array(ib)
         m = 0.5 * (np.array(pa) + np.array(pb))  # metres via the opening's middle
         d = np.hypot(*(points[ia] - m).T) + np.hypot(*(m - points[ib]).T)
+        d += TIGHT_PENALTY_M * np.array(tight)  # as the planner counts a tight passage
         d = np.maximum(d, 1e-6)  # csgraph treats zero as "no edge"
         rows = np.stack([ia, ib], axis=1).ravel()
         cols = np.stack([ib, ia], axis=1).ravel()

@@ -5,15 +5,26 @@
   inside a cell the split records which two pieces it joins; across a cell border the
   pieces are matched by interval overlap along the border line, which is known exactly
   from the cell index (the hyperplane of Algorithm 4) - never by comparing coordinates;
-* pruning for radius r: the robot's disc must fit inside explored free space, so
-  clearance is measured to obstacle *and* frontier vectors (the map does not know what
-  lies beyond a frontier). A node stays when some point of it (its centroid or a point
-  of one of its openings) has clearance r, an edge when a part of the shared opening
-  has (an opening narrower than 2r has none). A goal may lie closer to a frontier.
+* pruning for radius r: the robot's disc must keep r from obstacle vectors and
+  ``frontier_radius`` (at most r) from frontier vectors. A frontier is not a wall (the
+  thesis, section 2: "frontiers are not obstacles, but may be treated as such"): what
+  lies beyond it is unseen, and the local controller keeps its distance from whatever
+  the live scan shows there. With the full r, a door seen at an angle showed only a
+  wedge of the room behind it, bounded by two frontier vectors from its jambs, with no
+  room for the disc: no robot could enter (procedural worlds: missions ended at 43-98 %).
+  A node stays when some point of it (its centroid or a point of one of its openings)
+  has that clearance, an edge when a part of the shared opening has (an opening
+  narrower than 2r has none).
+* tight passages: an opening with room for the disc at ``tight_radius`` (the robot's
+  radius and the map's wall error) but not at r is an edge too, ``tight``, costing
+  ``TIGHT_PENALTY_M`` more. The procedural office's doors are 0.7 m wide in the clear,
+  8 cm wider than a 0.3 m clearance needs; the mapped jambs' noise closed them in the
+  graph, and a robot that had slipped into a room (a jamb still a frontier) was shut in
+  (in-process office runs: missions ended at 83-99 %).
 * incremental: ``update(map, changed_cells)`` recomputes only those cells and their
   neighbours (obstacles near a border change clearance on both sides).
 
-    graph = NavGraph.build(pmap, radius=0.25)
+    graph = NavGraph.build(pmap, radius=0.25, frontier_radius=0.1)
     graph = graph.update(new_map, delta_cells)
 """
 
@@ -24,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from polyswarm.config import NavConfig
 from polyswarm.polymap import (
     BORDER_TOL_M,
     CellIndex,
@@ -34,9 +46,13 @@ from polyswarm.polymap import (
 
 NodeId = tuple[int, int, int]  # cell i, cell j, piece index
 PORTAL_STEP_M = 0.05  # openings are checked for clearance at this spacing
-BOUNDARY = (VectorType.OBSTACLE, VectorType.FRONTIER)  # what the robot's disc must not cross
+# what the robot's disc keeps its distance from (obstacles: radius; frontiers: frontier_radius)
+BOUNDARY = (VectorType.OBSTACLE, VectorType.FRONTIER)
 BUFFER_SEGMENTS = 4  # quarter-circle segments of the planner's grown obstacles
 SAMPLE_SLACK_M = 0.005  # openings are sampled: keep this much extra clearance
+# a tight passage (room at the tight radius only) counts as this much longer, so a way
+# with the full clearance is taken unless it is longer by more than this
+TIGHT_PENALTY_M = 5.0
 
 
 def grown_radius(radius: float) -> float:
@@ -48,10 +64,12 @@ def grown_radius(radius: float) -> float:
 
 @dataclass(frozen=True)
 class Portal:
-    """The usable part of an opening between two nodes (clearance >= r along it)."""
+    """The usable part of an opening between two nodes (clearance >= r along it; a
+    ``tight`` one has only the graph's ``tight_radius``)."""
 
     a: np.ndarray
     b: np.ndarray
+    tight: bool = False
 
     @property
     def mid(self) -> np.ndarray:
@@ -71,20 +89,45 @@ class CellGraph:
 
 @dataclass
 class NavGraph:
-    radius: float
+    radius: float  # metres kept from obstacle vectors
     cell_size: float
     cells: dict[CellIndex, CellGraph] = field(default_factory=dict)
     borders: dict[tuple[CellIndex, CellIndex], dict[tuple[NodeId, NodeId], Portal]] = field(
         default_factory=dict
     )
+    frontier_radius: float | None = None  # metres kept from frontier vectors (None: radius)
+    tight_radius: float | None = None  # metres kept from obstacles in a tight passage
+
+    def __post_init__(self) -> None:
+        if self.frontier_radius is None:
+            self.frontier_radius = self.radius
+        if self.tight_radius is None:
+            self.tight_radius = self.radius
+        if not 0.0 <= self.frontier_radius <= self.radius:
+            raise ValueError("frontier_radius must be within [0, radius]")
+        if not 0.0 < self.tight_radius <= self.radius:
+            raise ValueError("tight_radius must be within (0, radius]")
 
     # -- construction -------------------------------------------------------------------
 
     @classmethod
-    def build(cls, pmap: GridPolyMap, radius: float) -> NavGraph:
-        g = cls(radius, pmap.cell_size)
+    def build(
+        cls,
+        pmap: GridPolyMap,
+        radius: float,
+        frontier_radius: float | None = None,
+        tight_radius: float | None = None,
+    ) -> NavGraph:
+        g = cls(radius, pmap.cell_size, frontier_radius=frontier_radius, tight_radius=tight_radius)
         g._recompute(pmap, set(pmap.cells))
         return g
+
+    @classmethod
+    def for_robot(cls, pmap: GridPolyMap, nav: NavConfig) -> NavGraph:
+        """The graph of ``pmap`` with the clearances of ``nav``."""
+        return cls.build(
+            pmap, nav.obstacle_clearance_m, nav.frontier_clearance_m, nav.tight_clearance_m
+        )
 
     def update(self, pmap: GridPolyMap, changed: set[CellIndex] | frozenset) -> NavGraph:
         """The graph after ``changed`` cells of ``pmap`` changed (in place; returns self).
@@ -124,14 +167,26 @@ class NavGraph:
             for key, a, b in _border_intervals(pmap, *pair):
                 jobs.add(("border", pair, key), a, b)
 
-        # 2. one clearance test of all their samples (and the piece centroids)
+        # 2. one clearance test of all their samples (and the piece centroids): the
+        #    radius from obstacles (a tight passage: the tight radius), the frontier
+        #    radius from frontiers
         reach = grown_radius(self.radius) + SAMPLE_SLACK_M
-        st, en = _boundary_around(pmap, live, reach)
+        reach_t = grown_radius(self.tight_radius) + SAMPLE_SLACK_M
+        reach_f = grown_radius(self.frontier_radius) + SAMPLE_SLACK_M
+        (so, eo), (sf, ef) = _boundary_around(pmap, live, reach)
         centroids = np.array(centroids, dtype=float).reshape(-1, 2)
         pts, first, n = jobs.samples()
-        ok = clear_of(np.concatenate([centroids, pts]), st, en, reach)
-        centre_ok, sample_ok = ok[: len(centroids)], ok[len(centroids) :]
-        portals = _longest_runs(pts, sample_ok, first, n)
+        every = np.concatenate([centroids, pts])
+        d_obstacle = clearance(every, so, eo, reach)
+        tight_ok = d_obstacle >= reach_t
+        if self.frontier_radius > 0:
+            tight_ok[tight_ok] = clear_of(every[tight_ok], sf, ef, reach_f)
+        wide_ok = tight_ok & (d_obstacle >= reach)
+        centre_ok = tight_ok[: len(centroids)]
+        portals = _longest_runs(pts, wide_ok[len(centroids) :], first, n)
+        if self.tight_radius < self.radius:  # openings with room at the tight radius only
+            tight = _longest_runs(pts, tight_ok[len(centroids) :], first, n, tight=True)
+            portals = [p if p is not None else t for p, t in zip(portals, tight, strict=True)]
 
         # 3. assemble nodes and edges
         fresh = {c: CellGraph({}, {}, len(pmap.cells[c].partition.pieces)) for c in live}
@@ -194,57 +249,66 @@ class NavGraph:
             if a == node:
                 yield b, p
             elif b == node:
-                yield a, Portal(p.b, p.a)
+                yield a, Portal(p.b, p.a, p.tight)
         for n in ((i + 1, j), (i, j + 1), (i - 1, j), (i, j - 1)):
             key = ((i, j), n) if (i, j) < n else (n, (i, j))
             for (a, b), p in self.borders.get(key, {}).items():
                 if a == node:
                     yield b, p
                 elif b == node:
-                    yield a, Portal(p.b, p.a)
+                    yield a, Portal(p.b, p.a, p.tight)
 
 
 # ---------------------------------------------------------------------------------------
 
 
-def _cell_boundary(cell) -> tuple[np.ndarray, np.ndarray]:
-    """Obstacle and frontier vectors of one cell, cached on the (immutable) cell."""
+def _cell_boundary(cell) -> tuple:
+    """((starts, ends) of obstacle vectors, (starts, ends) of frontier vectors) of one
+    cell, cached on the (immutable) cell."""
     cached = cell.__dict__.get("_nav_boundary")
     if cached is None:
         st, en, ty = cell.vectors
-        m = np.zeros(len(ty), dtype=bool)
-        for kind in BOUNDARY:
-            m |= ty == int(kind)
-        cached = (st[m], en[m])
+        cached = tuple((st[ty == int(kind)], en[ty == int(kind)]) for kind in BOUNDARY)
         cell.__dict__["_nav_boundary"] = cached
     return cached
 
 
-def _boundary_around(pmap: GridPolyMap, cells, reach: float):
-    """Boundary vectors of the cells and of every cell within ``reach`` of them."""
+def _boundary_around(pmap: GridPolyMap, cells, reach: float) -> tuple:
+    """Obstacle and frontier vectors (as ``_cell_boundary``) of the cells and of every
+    cell within ``reach`` of them."""
     k = 1 + int(reach // pmap.cell_size)
     near = {
         (i + di, j + dj) for i, j in cells for di in range(-k, k + 1) for dj in range(-k, k + 1)
     }
     parts = [_cell_boundary(pmap.cells[c]) for c in near if c in pmap.cells]
-    if not parts:
-        z = np.zeros((0, 2))
-        return z, z
-    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+    z = np.zeros((0, 2))
+    return tuple(
+        (
+            np.concatenate([z, *(p[kind][0] for p in parts)]),
+            np.concatenate([z, *(p[kind][1] for p in parts)]),
+        )
+        for kind in range(len(BOUNDARY))
+    )
 
 
 def clear_of(points: np.ndarray, st: np.ndarray, en: np.ndarray, radius: float) -> np.ndarray:
-    """For each point: is it at least ``radius`` from every segment st[k]-en[k]?
+    """For each point: is it at least ``radius`` from every segment st[k]-en[k]?"""
+    return clearance(points, st, en, radius) >= radius
+
+
+def clearance(points: np.ndarray, st: np.ndarray, en: np.ndarray, reach: float) -> np.ndarray:
+    """For each point: its distance to the nearest segment st[k]-en[k], or ``reach`` if
+    none is closer than that.
 
     Spatial hashing in numpy: each segment is registered in the bins (of side
-    ``radius``) that its bounding box grown by ``radius`` covers; a point is tested
+    ``reach``) that its bounding box grown by ``reach`` covers; a point is tested
     exactly against the segments registered in its own bin only."""
-    ok = np.ones(len(points), dtype=bool)
+    out = np.full(len(points), float(reach))
     if len(st) == 0 or len(points) == 0:
-        return ok
-    b = max(radius, 0.05)  # metres; bins smaller than 5 cm only add registrations
-    lo = np.floor((np.minimum(st, en) - radius) / b).astype(np.int64)
-    hi = np.floor((np.maximum(st, en) + radius) / b).astype(np.int64)
+        return out
+    b = max(reach, 0.05)  # metres; bins smaller than 5 cm only add registrations
+    lo = np.floor((np.minimum(st, en) - reach) / b).astype(np.int64)
+    hi = np.floor((np.maximum(st, en) + reach) / b).astype(np.int64)
     origin = lo.min(axis=0)
     lo, hi = lo - origin, hi - origin
     width = int(hi[:, 1].max()) + 1
@@ -261,7 +325,7 @@ def clear_of(points: np.ndarray, st: np.ndarray, en: np.ndarray, radius: float) 
     left = np.searchsorted(key, pkey, "left")
     m = np.where(inside, np.searchsorted(key, pkey, "right") - left, 0)
     if m.sum() == 0:
-        return ok
+        return out
     pidx = np.repeat(np.arange(len(points)), m)
     sidx = seg[np.repeat(left, m) + np.arange(len(pidx)) - np.repeat(np.cumsum(m) - m, m)]
     a, d = st[sidx], en[sidx] - st[sidx]
@@ -270,9 +334,10 @@ def clear_of(points: np.ndarray, st: np.ndarray, en: np.ndarray, radius: float) 
         np.einsum("ij,ij->i", rel, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-18), 0, 1
     )
     gap = rel - t[:, None] * d
-    close = np.einsum("ij,ij->i", gap, gap) < radius * radius
-    ok[pidx[close]] = False
-    return ok
+    dist = np.sqrt(np.einsum("ij,ij->i", gap, gap))
+    has = m > 0  # pidx is sorted: each point's candidates are one run
+    out[has] = np.minimum(out[has], np.minimum.reduceat(dist, (np.cumsum(m) - m)[has]))
+    return out
 
 
 class _Openings:
@@ -299,7 +364,7 @@ class _Openings:
         return a[owner] + t[:, None] * (b - a)[owner], first, n
 
 
-def _longest_runs(pts, ok, first, n) -> list[Portal | None]:
+def _longest_runs(pts, ok, first, n, tight: bool = False) -> list[Portal | None]:
     """For each opening: its longest run of usable samples, or None."""
     out: list[Portal | None] = [None] * len(first)
     if len(pts) == 0:
@@ -318,7 +383,7 @@ def _longest_runs(pts, ok, first, n) -> list[Portal | None]:
     order = np.lexsort((-length, owner[starts]))  # per opening, the longest run first
     first_of = np.r_[True, np.diff(owner[starts][order]) != 0]
     for k in order[first_of].tolist():
-        out[int(owner[starts[k]])] = Portal(pts[starts[k]].copy(), pts[stops[k]].copy())
+        out[int(owner[starts[k]])] = Portal(pts[starts[k]].copy(), pts[stops[k]].copy(), tight)
     return out
 
 

@@ -2,11 +2,15 @@
 
 1. A* over the graph's nodes (convex pieces), moving from opening to opening, from
    the piece holding the start to the piece holding the goal.
+   A tight passage (``Portal.tight``: room at the graph's tight radius only) costs
+   ``TIGHT_PENALTY_M`` more.
 2. The pieces found make a sleeve; its configuration space (the sleeve minus every
-   obstacle and frontier vector grown by the radius - grown by a circumscribed
-   polygon, so the clearance is never less than the radius) is triangulated. Start and
-   goal may be closer (the robot is there; a frontier goal lies at the frontier): they
-   join the nearest point of that space.
+   obstacle vector grown by the radius and frontier vector grown by the frontier
+   radius - grown by circumscribed polygons, so the clearance is never less; the two
+   pieces at a tight passage keep the tight radius) is triangulated. Start and goal may
+   be closer (the robot is there; a frontier goal lies at the frontier): they join the
+   nearest point of that space. If the space is cut, the opening into the first piece
+   the start cannot reach is blocked and A* tries again.
 3. A* over the triangles and the funnel algorithm (string pulling through the shared
    edges) give the shortest path inside the sleeve: taut, and at least the radius from
    every obstacle vector. The thesis' paths went from polygon centre to polygon centre
@@ -15,6 +19,8 @@
     planner = Planner(pmap, graph)
     path = planner.plan(start_xy, goal_xy)      # PlanningError if impossible
     path.points, path.length_m
+    path = planner.plan(start_xy, goal_xy, partial=True)  # else as close as the map lets
+    path.reaches_goal                           # False: it ends short of the goal
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mapbox_earcut
 import numpy as np
@@ -33,17 +39,22 @@ from polyswarm.errors import PlanningError
 from polyswarm.navgraph import (
     BOUNDARY,
     BUFFER_SEGMENTS,
+    TIGHT_PENALTY_M,
     NavGraph,
     NodeId,
+    Portal,
     grown_radius,
     node_of,
     piece_polygon,
 )
-from polyswarm.polymap import GridPolyMap
+from polyswarm.polymap import GridPolyMap, VectorType
 
 ENTRY_INSET_M = 2e-3  # an entry point lies this far inside the free space
 JOIN_M = 1.0  # start or goal this close to the robot's free space joins it straight
 MAX_SLEEVE_RETRIES = 4  # openings blocked by the exact check before giving up
+# a partial path (``plan(partial=True)``) must end at least this much closer to the goal
+# than the start is: otherwise the robot would only shuffle on the spot
+PARTIAL_GAIN_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -51,6 +62,7 @@ class Path:
     points: np.ndarray  # (k, 2) metres
     nodes: tuple[NodeId, ...]
     expansions: int
+    reaches_goal: bool = True  # False: a partial path, to the nearest point it could reach
 
     @property
     def length_m(self) -> float:
@@ -64,8 +76,16 @@ class Planner:
         self.map = pmap
         self.graph = graph
         self.radius = graph.radius
+        self.frontier_radius = graph.frontier_radius
 
-    def plan(self, start, goal) -> Path:
+    def plan(self, start, goal, partial: bool = False) -> Path:
+        """The shortest path with the graph's clearance from start to goal.
+
+        With ``partial``, a goal the robot cannot reach (the map's free space is cut
+        short of it, often by a frontier just past a narrow door) gives the path to the
+        nearest point it can reach instead, if that is at least ``PARTIAL_GAIN_M``
+        closer to the goal: an exploring robot drives as close as it can and looks,
+        and the frontier retreats. Raises PlanningError otherwise."""
         start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
         # a start or goal in a piece too tight for the robot joins the graph nearby; so
         # does a robot standing in a sliver the map left unexplored (it is on free space)
@@ -82,20 +102,29 @@ class Planner:
             raise PlanningError(f"no room for radius {self.radius} m near the {where}")
         blocked: set[tuple[NodeId, NodeId]] = set()
         expansions = 0
+        nearest: Path | None = None  # of the sleeves tried, the path nearest the goal
+        why = f"no path from {tuple(start)} to {tuple(goal)} for radius {self.radius} m"
         for _ in range(MAX_SLEEVE_RETRIES + 1):
             nodes, n_exp = self._astar(sources, targets, goal, blocked)
             expansions += n_exp
             if nodes is None:
-                raise PlanningError(
-                    f"no path from {tuple(start)} to {tuple(goal)} for radius {self.radius} m"
-                )
-            pts, bad = self._taut(nodes, start, goal, (s_node, g_node))
-            if pts is not None:
-                return Path(pts, tuple(nodes), expansions)
-            blocked |= bad
-        raise PlanningError(
-            f"no path with {self.radius} m clearance from {tuple(start)} to {tuple(goal)}"
-        )
+                break
+            sleeve = self._taut(nodes, start, goal, (s_node, g_node))
+            if sleeve.path is not None:
+                return Path(sleeve.path, tuple(nodes), expansions)
+            blocked |= sleeve.cut
+            if sleeve.towards is not None and (
+                nearest is None or _gap(sleeve.towards, goal) < _gap(nearest.points, goal)
+            ):
+                nearest = Path(sleeve.towards, tuple(nodes), expansions, reaches_goal=False)
+            why = f"no path with {self.radius} m clearance from {tuple(start)} to {tuple(goal)}"
+        if (
+            partial
+            and nearest is not None
+            and (_gap(start[None], goal) - _gap(nearest.points, goal) >= PARTIAL_GAIN_M)
+        ):
+            return nearest
+        raise PlanningError(why)
 
     def _entries(
         self, node: NodeId | None, p: np.ndarray
@@ -144,7 +173,7 @@ class Planner:
                     continue
                 # enter m at the point of its opening closest to the straight line on
                 cross = _closest_on_segment(portal.a, portal.b, here, goal)
-                cost = best[n] + float(np.hypot(*(cross - here)))
+                cost = best[n] + float(np.hypot(*(cross - here))) + TIGHT_PENALTY_M * portal.tight
                 if m in targets:
                     cost += float(np.hypot(*(goal - cross)))
                 if cost < best.get(m, math.inf):
@@ -157,7 +186,7 @@ class Planner:
 
     # -- 2./3. the taut path in the sleeve ------------------------------------------------
 
-    def _taut(self, nodes, start, goal, ends=()):
+    def _taut(self, nodes, start, goal, ends=()) -> _Sleeve:
         # the start's and goal's pieces too (a start in an unexplored sliver has none)
         pieces = list(dict.fromkeys([*nodes, *(e for e in ends if e is not None)]))
         polys = [shapely.Polygon(piece_polygon(self.map, n)) for n in pieces]
@@ -176,39 +205,105 @@ class Planner:
                 math.floor((y1 + reach) / self.map.cell_size) + 1,
             )
         ]
-        st, en, _ = self.map.vectors(BOUNDARY, cells)
-        r_out = grown_radius(r)  # circumscribed: never closer than r
+        st, en, ty = self.map.vectors(BOUNDARY, cells)
+        frontier = ty == int(VectorType.FRONTIER)
         if len(st):  # only walls whose grown shape can reach the sleeve: a long diagonal
             # path's box holds most of the map, and growing all of it was one GEOS call of
             # seconds on a loaded machine (an agent killed in it at shutdown)
             shapely.prepare(sleeve)
             lines = shapely.linestrings(np.stack([st, en], axis=1))
-            near = shapely.dwithin(sleeve, lines, r_out + 1e-3)
-            st, en = st[near], en[near]
-        free = sleeve
-        if len(st):
-            grown = shapely.buffer(
-                shapely.multilinestrings(np.stack([st, en], axis=1)),
-                r_out,
-                quad_segs=BUFFER_SEGMENTS,
+            near = shapely.dwithin(sleeve, lines, grown_radius(r) + 1e-3)
+            st, en, frontier = st[near], en[near], frontier[near]
+        free = shapely.difference(sleeve, self._grown(st, en, frontier, r), grid_size=1e-6)
+        # a tight passage on the route: its two pieces keep only the tight radius
+        tight = {
+            k
+            for i, (a, b) in enumerate(itertools.pairwise(nodes))
+            if _portal(self.graph, a, b).tight
+            for k in (i, i + 1)
+        }
+        if tight:
+            narrow = shapely.union_all([polys[k] for k in sorted(tight)], grid_size=1e-6)
+            grown = self._grown(st, en, frontier, self.graph.tight_radius)
+            free = shapely.union(
+                free, shapely.difference(narrow, grown, grid_size=1e-6), grid_size=1e-6
             )
-            free = shapely.difference(sleeve, grown, grid_size=1e-6)
         # the goal's part of the free space first: a robot standing too close to a
         # wall (in a doorway) joins that part if it can, not merely the nearest part
         part_g, g_eff = _component_and_entry(free, goal)
         part_s, s_eff = _component_and_entry(free, start, prefer=part_g)
-        if part_s is None or part_g is None or not part_s.equals(part_g):
-            # the sleeve is cut by obstacles somewhere: block the narrowest opening
-            return None, _narrowest_openings(self.graph, nodes)
+        if part_s is None:
+            return _Sleeve(cut=_narrowest_openings(self.graph, nodes))
+        if part_g is None or not part_s.equals(part_g):
+            # the sleeve is cut by obstacles: block the opening into the first piece of
+            # the route the start's part of the free space does not reach
+            return _Sleeve(
+                cut=_cut_opening(self.graph, nodes, polys[: len(nodes)], part_s),
+                towards=self._towards(part_s, s_eff, start, goal),
+            )
         inner = shapely.set_precision(part_s, 1e-6)
         tri_pts = _channel(inner, s_eff, g_eff)
         if tri_pts is None:
-            return None, _narrowest_openings(self.graph, nodes)
-        pts = [start] if np.hypot(*(start - s_eff)) > 1e-9 else []
-        pts += list(tri_pts)
-        if np.hypot(*(goal - g_eff)) > 1e-9:
-            pts.append(goal)
-        return _dedupe(np.array(pts)), set()
+            return _Sleeve(cut=_narrowest_openings(self.graph, nodes))
+        return _Sleeve(path=_with_ends(tri_pts, start, s_eff, goal, g_eff))
+
+    def _grown(self, st, en, frontier, radius: float):
+        """Obstacle vectors grown by ``radius`` and frontier vectors by the frontier
+        radius, each by a circumscribed polygon (never closer than that)."""
+        parts = [
+            shapely.buffer(
+                shapely.multilinestrings(np.stack([st[m], en[m]], axis=1)),
+                grown_radius(g),
+                quad_segs=BUFFER_SEGMENTS,
+            )
+            for m, g in ((~frontier, radius), (frontier, self.frontier_radius))
+            if m.any() and g > 0
+        ]
+        return shapely.union_all(parts) if parts else shapely.Polygon()
+
+    def _towards(self, part, s_eff, start, goal) -> np.ndarray | None:
+        """The path within ``part`` (the start's free space) to its point nearest the goal."""
+        inner = part.buffer(-ENTRY_INSET_M)
+        if inner.is_empty:
+            return None
+        end = np.asarray(shapely.ops.nearest_points(inner, shapely.Point(goal))[0].coords[0])
+        tri_pts = _channel(shapely.set_precision(part, 1e-6), s_eff, end)
+        return None if tri_pts is None else _with_ends(tri_pts, start, s_eff, end, end)
+
+
+@dataclass(frozen=True)
+class _Sleeve:
+    """What the exact check of one A* route found: the path, or the openings to block
+    (and the path towards the goal as far as the route's free space reaches)."""
+
+    path: np.ndarray | None = None
+    cut: set = field(default_factory=set)
+    towards: np.ndarray | None = None
+
+
+def _with_ends(tri_pts, start, s_eff, goal, g_eff) -> np.ndarray:
+    """The channel's path with the true start and goal (they may lie a little outside
+    the free space: the robot stands there; a frontier goal lies at the frontier)."""
+    pts = [start] if np.hypot(*(start - s_eff)) > 1e-9 else []
+    pts += list(tri_pts)
+    if np.hypot(*(goal - g_eff)) > 1e-9:
+        pts.append(goal)
+    return _dedupe(np.array(pts))
+
+
+def _gap(points: np.ndarray, goal: np.ndarray) -> float:
+    """Metres from a path's end to the goal."""
+    return float(np.hypot(*(points[-1] - goal)))
+
+
+def _cut_opening(graph: NavGraph, nodes, polys, part) -> set:
+    """The opening into the first piece of the route that ``part`` (the start's free
+    space) does not enter; the narrowest opening if it enters them all."""
+    entered = shapely.area(shapely.intersection(polys, part)) > 1e-6
+    k = int(np.argmin(entered)) if not entered.all() else 0
+    if k == 0:
+        return _narrowest_openings(graph, nodes)
+    return {(nodes[k - 1], nodes[k])}
 
 
 def _closest_on_segment(a, b, p, goal) -> np.ndarray:
@@ -226,6 +321,11 @@ def _closest_on_segment(a, b, p, goal) -> np.ndarray:
             return a + t * d
     t = np.clip(np.dot(p - a, d) / L2, 0.0, 1.0)
     return a + t * d
+
+
+def _portal(graph: NavGraph, a: NodeId, b: NodeId) -> Portal:
+    """The opening from node a to its neighbour b."""
+    return next(p for m, p in graph.neighbours(a) if m == b)
 
 
 def _narrowest_openings(graph: NavGraph, nodes) -> set:

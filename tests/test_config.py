@@ -42,6 +42,9 @@ def test_round_trip_through_toml(tmp_path):
         {"sim": {"lidar": {"range_min_m": 40.0}}},
         {"explore": {"strategy": "random"}},
         {"slam": {"refine": {"score_c": 0.0}}},
+        {"nav": {"frontier_clearance_m": 0.5}},  # more than radius + margin (0.3 m)
+        {"nav": {"tight_margin_m": 0.2}},  # more than clearance_margin_m
+        {"nav": {"tight_margin_m": -0.01}},
     ],
 )
 def test_range_checks(override):

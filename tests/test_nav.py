@@ -165,3 +165,74 @@ def test_graph_index_weights_are_path_lengths_through_the_portals():
         ia, ib = index.index[a], index.index[b]
         assert index.matrix[ia, ib] == pytest.approx(want)
         assert index.matrix[ib, ia] == pytest.approx(want)
+
+
+def test_a_goal_past_a_pinch_gives_a_partial_path_only_when_asked():
+    # a corridor 2 m wide with a tooth from the floor up to 0.5 m below the ceiling: no
+    # room for the 0.6 m disc. The sampled graph lets the route through (an opening from
+    # the tooth's tip has clearance at its far end); the exact check cuts it
+    ring = Ring([(0, 0), (4, 0), (5, 1.5), (6, 0), (10, 0), (10, 2), (0, 2)], [O] * 7)
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(ring)).map
+    planner = Planner(pmap, NavGraph.build(pmap, 0.3))
+    with pytest.raises(PlanningError):
+        planner.plan((1, 1), (9, 1))
+    path = planner.plan((1, 1), (9, 1), partial=True)
+    assert not path.reaches_goal
+    end = path.points[-1]
+    assert end[0] < 5.0  # on the start's side of the pinch
+    assert np.hypot(*(end - (9, 1))) <= np.hypot(8, 0) - 0.5  # PARTIAL_GAIN_M closer
+    assert path_clearance(path.points, *obstacles(pmap)) >= 0.3 - 1e-6
+    # a goal on the start's side is reached in full, partial or not
+    assert planner.plan((1, 1), (3, 1), partial=True).reaches_goal
+
+
+def door_rooms(wide_door: bool) -> GridPolyMap:
+    """Rooms 0-3 and 3.5-6 (x) by 0-4 (y) with a 0.6 m door at y 0.7-1.3 and, if
+    ``wide_door``, a 1.0 m one at y 2.6-3.6."""
+    first = [(0, 0), (3, 0), (3, 0.7), (3.5, 0.7), (3.5, 0), (6, 0), (6, 4), (3.5, 4)]
+    if wide_door:
+        shell = Ring([*first, (3.5, 3.6), (3, 3.6), (3, 4), (0, 4)], [O] * 12)
+        pillar = Ring([(3, 1.3), (3, 2.6), (3.5, 2.6), (3.5, 1.3)], [O] * 4)  # clockwise
+        return GridPolyMap(2.0).merge(TypedPolygon(shell, (pillar,))).map
+    shell = Ring([*first, (3.5, 1.3), (3, 1.3), (3, 4), (0, 4)], [O] * 12)
+    return GridPolyMap(2.0).merge(TypedPolygon(shell)).map
+
+
+def test_a_tight_door_is_passable_at_the_tight_radius_and_a_wider_way_preferred():
+    # radius 0.3 m needs 0.62 m (the grown polygon circumscribes the circle, and the
+    # samples keep 5 mm); the tight radius 0.23 m (robot 0.2 m + 3 cm of wall error)
+    # fits the 0.6 m door
+    pmap = door_rooms(wide_door=False)
+    with pytest.raises(PlanningError):
+        Planner(pmap, NavGraph.build(pmap, 0.3)).plan((1, 1), (5, 1))
+    graph = NavGraph.build(pmap, 0.3, tight_radius=0.23)
+    path = Planner(pmap, graph).plan((1, 1), (5, 1))
+    assert path.reaches_goal
+    assert path.length_m == pytest.approx(4.0, abs=0.05)  # straight through the door
+    assert path_clearance(path.points, *obstacles(pmap)) >= 0.23 - 1e-6
+    assert any(p.tight for n in path.nodes for _, p in graph.neighbours(n))
+    # with a 1 m door 1.5 m further round, the path takes it (TIGHT_PENALTY_M = 5 m)
+    pmap = door_rooms(wide_door=True)
+    path = Planner(pmap, NavGraph.build(pmap, 0.3, tight_radius=0.23)).plan((1, 1), (5, 1))
+    at_wall = path.points[(path.points[:, 0] > 2.9) & (path.points[:, 0] < 3.6)]
+    assert len(at_wall) and (at_wall[:, 1] > 2.6).all()
+    assert path_clearance(path.points, *obstacles(pmap)) >= 0.3 - 1e-6
+
+
+def test_frontiers_keep_the_frontier_radius_only():
+    # a 0.55 m strip off a room, walled below and frontier (unseen) above (and the
+    # room's wall above it, seen at a grazing angle): too narrow for 0.3 m on both sides,
+    # wide enough for 0.3 m from the wall and 0.1 m from the frontier
+    F = VectorType.FRONTIER
+    ring = Ring(
+        [(0, 0), (4, 0), (4, 0.5), (8, 0.5), (8, 1.05), (4, 1.05), (4, 2), (0, 2)],
+        [O, O, O, F, F, F, O, O],
+    )
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(ring)).map
+    with pytest.raises(PlanningError):
+        Planner(pmap, NavGraph.build(pmap, 0.3)).plan((1, 1), (7, 0.85))
+    path = Planner(pmap, NavGraph.build(pmap, 0.3, frontier_radius=0.1)).plan((1, 1), (7, 0.85))
+    assert path.reaches_goal
+    assert path_clearance(path.points, *obstacles(pmap)) >= 0.3 - 1e-6
+    fs, fe, _ = pmap.vectors([F])
+    assert path_clearance(path.points, fs, fe) >= 0.1 - 1e-6
