@@ -426,17 +426,41 @@ def test_a_frontier_across_a_doorway_in_line_with_the_wall_stays_a_frontier():
 
 
 def test_a_frontier_in_front_of_a_wall_whose_growth_is_too_thin_to_keep_becomes_that_wall():
-    # SLAM ignores growth thinner than min_growth_m (lidar noise along walls): a chord
-    # 4 cm in front of a wall seen head-on later can then never close by growing
-    grazing = rect(0.2, 0.2, 0.96, 1.0, (O, F, O, O))
-    head_on = rect(0.5, 0.2, 1.0, 1.0, (O, O, O, F))
+    # SLAM ignores growth thinner than min_growth_m along walls (lidar noise): a chord
+    # 4 cm in front of a wall seen head-on later, in a passage 8 cm wide (the growth lies
+    # along its walls), can then never close by growing
+    grazing = rect(0.2, 0.2, 0.96, 0.28, (O, F, O, O))
+    head_on = rect(0.5, 0.2, 1.0, 0.28, (O, O, O, F))
     thin = MergeOptions(min_growth_m=0.05)
     plain = GridPolyMap(2.0).merge(grazing, thin).map.merge(head_on, thin).map
-    assert _right_side(plain, VectorType.FRONTIER, 0.95, 0.97) == pytest.approx(0.8)
+    assert _right_side(plain, VectorType.FRONTIER, 0.95, 0.97) == pytest.approx(0.08)
     snap = MergeOptions(min_growth_m=0.05, obstacle_snap_front_m=0.08)
     pmap = GridPolyMap(2.0).merge(grazing, snap).map.merge(head_on, snap).map
     assert _right_side(pmap, VectorType.FRONTIER, 0.95, 0.97) == 0.0
-    assert _right_side(pmap, VectorType.OBSTACLE, 0.95, 0.97) == pytest.approx(0.8)
+    assert _right_side(pmap, VectorType.OBSTACLE, 0.95, 0.97) == pytest.approx(0.08)
+    # in a room 0.8 m wide the same 4 cm lie along no old wall: they are kept
+    grazing = rect(0.2, 0.2, 0.96, 1.0, (O, F, O, O))
+    head_on = rect(0.5, 0.2, 1.0, 1.0, (O, O, O, F))
+    plain = GridPolyMap(2.0).merge(grazing, thin).map.merge(head_on, thin).map
+    assert _right_side(plain, VectorType.FRONTIER, 0.95, 0.97) == 0.0
+    assert _right_side(plain, VectorType.OBSTACLE, 0.99, 1.01) == pytest.approx(0.8)
+
+
+def test_thin_growth_along_a_wall_is_dropped_and_thin_growth_between_frontiers_kept():
+    thin = MergeOptions(min_growth_m=0.05)
+    # creep: the same room seen again with its east wall 2 cm further out
+    room = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.8), thin).map
+    crept = room.merge(rect(0.2, 0.2, 1.02, 1.8), thin).map
+    assert crept.explored_area() == pytest.approx(room.explored_area(), abs=1e-9)
+    # a pocket: a room whose east side is a frontier 4 cm short of a corridor seen from
+    # elsewhere (the sliver a keyframe fan leaves across a door), then a view of the
+    # pocket. It lies between frontiers, far from the walls: it fills
+    two = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.8, (O, F, O, O)), thin).map
+    two = two.merge(rect(1.04, 0.2, 1.8, 1.8, (O, O, O, F)), thin).map
+    assert not two.is_free(1.02, 1.0)
+    filled = two.merge(rect(0.9, 0.5, 1.1, 1.5, (F, F, F, F)), thin).map
+    assert filled.is_free(1.02, 1.0)
+    assert filled.explored_area() == pytest.approx(two.explored_area() + 0.04 * 1.0, abs=1e-6)
 
 
 # --- merge operations (a keyframe's delta sent as the polygon it merged) ---------------

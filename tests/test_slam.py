@@ -101,5 +101,7 @@ def test_a_robot_turning_at_the_maze_start_has_room_to_plan(shared_data):
             lengths[free_m] = planner.plan(slam.pose[:2], goal).length_m
         except PlanningError as err:  # the old behaviour, recorded
             lengths[free_m] = str(err)
-    assert "no room" in str(lengths[base.slam.frontier_range_m])  # the scene still bites
+    # the scene still bites: no plan ("no room near the start", or with pockets between
+    # frontiers filled by the merge, "no path")
+    assert isinstance(lengths[base.slam.frontier_range_m], str)
     assert lengths[base.slam.no_return_free_m] == pytest.approx(np.hypot(1.2, 1.2), rel=0.05)
