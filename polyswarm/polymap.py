@@ -1469,6 +1469,7 @@ def _obstacle_mask(
             obstacle_snap_m,
             SNAP_ANGLE_DEG,
             tree,
+            within_ends=True,
         )
         hit[front[near]] = True
     if max(snap_beside_m) > 0:
@@ -1502,10 +1503,14 @@ def _along_obstacles(
     tol: float = MATCH_TOL_M,
     max_angle_deg: float = 30.0,
     tree: shapely.STRtree | None = None,
+    within_ends: bool = False,
 ) -> np.ndarray:
-    """Vectors a->b lying along a source obstacle vector (within ``tol``), in the same
-    direction (within ``max_angle_deg``). ``tree``: the sources' ``_segment_tree``, if
-    the caller has it."""
+    """Vectors a->b lying along a source obstacle vector (within ``tol`` of its line,
+    the middle within ``tol`` of the vector), in the same direction (within
+    ``max_angle_deg``). With ``within_ends`` neither end may lie past the source's ends
+    by more than ``tol``: a frontier that continues a wall's line past the wall's end
+    (the view past a door jamb) is not snapped to that wall. ``tree``: the sources'
+    ``_segment_tree``, if the caller has it."""
     hit = np.zeros(len(a), dtype=bool)
     if len(src_starts) == 0 or len(a) == 0:
         return hit
@@ -1518,12 +1523,15 @@ def _along_obstacles(
     n = d / np.where(L > 0, L, 1.0)[:, None]
     da = np.abs(_cross(n, a[k] - src_starts[j]))
     db = np.abs(_cross(n, b[k] - src_starts[j]))
+    ta = np.einsum("ij,ij->i", a[k] - src_starts[j], n)  # positions along the source
+    tb = np.einsum("ij,ij->i", b[k] - src_starts[j], n)
+    within = (np.minimum(ta, tb) >= -tol) & (np.maximum(ta, tb) <= L + tol) if within_ends else True
     u = b[k] - a[k]
     lu = np.hypot(u[:, 0], u[:, 1])
     # same direction within 30 degrees: millimetre-long vectors made by rounding
     # would otherwise match any nearby obstacle
     same_dir = np.einsum("ij,ij->i", u, n) >= np.cos(np.radians(max_angle_deg)) * lu
-    ok = (L > 0) & (da <= tol) & (db <= tol) & same_dir & (lu > 0)
+    ok = (L > 0) & (da <= tol) & (db <= tol) & within & same_dir & (lu > 0)
     hit[np.unique(k[ok])] = True
     return hit
 
