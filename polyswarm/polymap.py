@@ -1523,9 +1523,11 @@ def _along_obstacles(
     n = d / np.where(L > 0, L, 1.0)[:, None]
     da = np.abs(_cross(n, a[k] - src_starts[j]))
     db = np.abs(_cross(n, b[k] - src_starts[j]))
-    ta = np.einsum("ij,ij->i", a[k] - src_starts[j], n)  # positions along the source
-    tb = np.einsum("ij,ij->i", b[k] - src_starts[j], n)
-    within = (np.minimum(ta, tb) >= -tol) & (np.maximum(ta, tb) <= L + tol) if within_ends else True
+    within = True
+    if within_ends:  # both ends' positions along the source, within its extent
+        ta = np.einsum("ij,ij->i", a[k] - src_starts[j], n)
+        tb = np.einsum("ij,ij->i", b[k] - src_starts[j], n)
+        within = (np.minimum(ta, tb) >= -tol) & (np.maximum(ta, tb) <= L + tol)
     u = b[k] - a[k]
     lu = np.hypot(u[:, 0], u[:, 1])
     # same direction within 30 degrees: millimetre-long vectors made by rounding

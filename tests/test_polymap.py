@@ -540,7 +540,7 @@ def test_a_frontier_continuing_past_a_wall_end_is_not_snapped_to_the_wall():
     # phantom wall that narrowed the door from 0.7 to 0.52 m
     wall_s, wall_e = np.array([[0.0, 1.0]]), np.array([[1.0, 1.0]])
     tree = _segment_tree(wall_s, wall_e)
-    a = np.array([[0.96, 1.0], [0.2, 0.97]])  # past the end; along the wall, 3 cm in front
+    a = np.array([[0.96, 1.0], [0.2, 0.97]])  # past the end; along the wall, 3 cm off it
     b = np.array([[1.12, 0.96], [0.8, 0.975]])
     snapped = _obstacle_mask(a, b, wall_s, wall_e, tree, obstacle_snap_m=0.05)
     assert snapped.tolist() == [False, True]
