@@ -245,6 +245,15 @@ class Cell:
         m = t == kind
         return s[m], e[m]
 
+    def wall_zone(self, width_m: float) -> shapely.Geometry:
+        """Everything within ``width_m`` of the cell's obstacle vectors (kept per width:
+        a cell that new keyframes only creep along is asked again and again)."""
+        zones = self.__dict__.setdefault("_wall_zones", {})
+        if width_m not in zones:
+            lines = _lines(*self.obstacle_vectors)
+            zones[width_m] = shapely.buffer(lines, width_m, quad_segs=2)
+        return zones[width_m]
+
     @cached_property
     def area(self) -> float:
         return float(self.region.area)
@@ -606,8 +615,8 @@ class GridPolyMap:
             )
             if walls.any():
                 k = np.nonzero(walls)[0]
-                lines = [_lines(*self.cells[idxs[w]].obstacle_vectors) for w in k]
-                regions[k] = _drop_thin_growth(old[k], regions[k], opt.min_growth_m, lines)
+                walls_of = [self.cells[idxs[w]] for w in k]
+                regions[k] = _drop_thin_growth(old[k], regions[k], opt.min_growth_m, walls_of)
         # nothing explored is ever lost: rounding moves a vector by less than a grid step,
         # so any larger loss is a bug, and the merge is refused as a whole
         lost = shapely.area(regions) < old_area - shapely.length(old) * PRECISION_M
@@ -856,11 +865,11 @@ class GridPolyMap:
 
 
 def _drop_thin_growth(
-    old: np.ndarray, new: np.ndarray, width_m: float, walls: list | None = None
+    old: np.ndarray, new: np.ndarray, width_m: float, walls: list[Cell] | None = None
 ) -> np.ndarray:
     """Regions that keep ``old`` where all of the growth is thinner than ``width_m``
-    and lies along the cell's old walls (``walls``: one geometry of obstacle vectors per
-    cell; None: every thin growth is dropped).
+    and lies along the cell's old walls (``walls``: the old cell of each region, whose
+    obstacle vectors count; None: every thin growth is dropped).
 
     Only cells whose growth is small for their outline can be pure creep along walls
     (area below outline length x width); their growth is tested with a negative
@@ -878,8 +887,7 @@ def _drop_thin_growth(
     thin = ~failed & shapely.is_empty(shapely.buffer(extra, -width_m / 2, quad_segs=2))
     if walls is not None and thin.any():
         t = np.nonzero(thin)[0]
-        mine = np.array([walls[k[j]] for j in t], dtype=object)
-        near = shapely.buffer(mine, width_m, quad_segs=2)
+        near = np.array([walls[k[j]].wall_zone(width_m) for j in t], dtype=object)
         along, bad = _overlay(shapely.intersection, extra[t], near)
         thin[t] = bad | (shapely.area(along) >= CREEP_SHARE * shapely.area(extra[t]))
     out[k[thin]] = old[k[thin]]
