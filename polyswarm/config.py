@@ -194,6 +194,11 @@ class SlamConfig:
     merge_quantum_m: float = 0.001
     obstacle_max_gap_m: float = 0.5  # consecutive points farther apart become a frontier...
     obstacle_gap_beams: float = 4.0  # ...unless within this many beam spacings at their range
+    # rebuild_map (offline runs, after loop closures) merges this many consecutive
+    # keyframes in one pass: they overlap, so a pass costs little more than one merge.
+    # The maze route's 3,296 keyframes: 76 s one by one, 23 s by 8 (IoU 0.996 both, mean
+    # wall distance 12.7 -> 13.5 mm, obstacle vectors 3,748 -> 4,334); 1: one by one
+    rebuild_batch: int = 8
     icp: IcpConfig = field(default_factory=IcpConfig)
     submap: SubmapConfig = field(default_factory=SubmapConfig)
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
@@ -472,6 +477,8 @@ def validate(cfg: Config) -> None:
     for name in ("obstacle_snap_behind_m", "obstacle_snap_front_m"):
         if not (0.0 <= getattr(cfg.slam, name) <= 0.5):
             raise ConfigError(f"slam.{name} must be 0-0.5 m (0: off)")
+    if cfg.slam.rebuild_batch < 1:
+        raise ConfigError("slam.rebuild_batch must be at least 1 keyframe")
     wp = cfg.map.whole_map_precision_m
     if not (1e-5 <= wp <= 0.01 and abs(wp * 1e5 - round(wp * 1e5)) < 1e-6):
         raise ConfigError("map.whole_map_precision_m must be 0.00001-0.01 m in whole 10 um steps")

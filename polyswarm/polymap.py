@@ -25,7 +25,7 @@ import hashlib
 import itertools
 import logging
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import astuple, dataclass, field
 from enum import IntEnum
 from functools import cached_property
@@ -434,6 +434,33 @@ class GridPolyMap:
             return self._merge_geometry(geom, s[obstacle], e[obstacle], options or MergeOptions())
         except shapely.errors.GEOSException as err:  # the last net: this map is unchanged
             raise GeometryError(f"GEOS failed to merge the polygon: {err}") from err
+
+    def merge_many(
+        self, polygons: Sequence[TypedPolygon], options: MergeOptions | None = None
+    ) -> MergeResult:
+        """Merge several polygons in one pass: their union (snapped to the map's grid)
+        with the obstacle vectors of all of them, typed as ``merge`` types one polygon.
+
+        Overlapping polygons (consecutive keyframes) touch mostly the same cells, so one
+        pass costs about what merging one of them costs. The result may differ from
+        merging them one by one where ``options`` judge each merge's growth (a thin
+        growth one polygon adds is judged together with the others). An invalid polygon
+        raises ``InvalidPolygonError`` and the map is unchanged."""
+        polygons = list(polygons)
+        if len(polygons) == 1:
+            return self.merge(polygons[0], options)
+        if not polygons:
+            return MergeResult(self, frozenset())
+        geoms = [p.validate() for p in polygons]
+        segs = [p.segments() for p in polygons]
+        obstacle = [t == VectorType.OBSTACLE for _, _, t in segs]
+        s = np.concatenate([x[0][o] for x, o in zip(segs, obstacle, strict=True)])
+        e = np.concatenate([x[1][o] for x, o in zip(segs, obstacle, strict=True)])
+        try:
+            geom = shapely.union_all(geoms, grid_size=PRECISION_M)
+            return self._merge_geometry(geom, s, e, options or MergeOptions())
+        except shapely.errors.GEOSException as err:  # the last net: this map is unchanged
+            raise GeometryError(f"GEOS failed to merge {len(polygons)} polygons: {err}") from err
 
     @classmethod
     def from_polygons(

@@ -331,12 +331,22 @@ class PolySlam:
         return np.array([compose(kf[i], off) for i, off in self._steps]).reshape(-1, 3)
 
     def rebuild_map(self) -> GridPolyMap:
-        """A new map of every keyframe merged at its optimised pose."""
+        """A new map of every keyframe merged at its optimised pose, ``rebuild_batch``
+        consecutive keyframes a pass (a batch that fails is merged one by one)."""
         pmap = GridPolyMap(self.map.cell_size)
-        for k, kf in enumerate(self.store.keyframes):
+        kfs = self.store.keyframes
+        step = self.cfg.rebuild_batch
+        for k0 in range(0, len(kfs), step):
+            polys = [kf.polygon_in_map() for kf in kfs[k0 : k0 + step]]
             try:
-                pmap = pmap.merge(kf.polygon_in_map(), self.merge_options).map
+                pmap = pmap.merge_many(polys, self.merge_options).map
+                continue
             except PolyswarmError as e:
-                self.rejected_keyframes += 1
-                log.warning("keyframe %d not merged into the rebuilt map: %s", k, e)
+                log.info("keyframes %d-%d merged one by one: %s", k0, k0 + len(polys) - 1, e)
+            for k, poly in enumerate(polys, start=k0):
+                try:
+                    pmap = pmap.merge(poly, self.merge_options).map
+                except PolyswarmError as e:
+                    self.rejected_keyframes += 1
+                    log.warning("keyframe %d not merged into the rebuilt map: %s", k, e)
         return pmap

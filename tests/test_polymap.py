@@ -357,6 +357,43 @@ def test_applying_a_delta_to_a_copy_reproduces_the_source(kfs):
     assert all(copy.cells[k].same_content(src.cells[k]) for k in src.cells)
 
 
+@given(st.lists(keyframes(), min_size=2, max_size=6), st.sampled_from([1.0, 2.0]))
+def test_merging_many_at_once_is_the_union_of_merging_them_one_by_one(kfs, cell_size):
+    one = GridPolyMap(cell_size)
+    for kf in kfs:
+        one = one.merge(kf).map
+    many = GridPolyMap(cell_size).merge_many(kfs).map
+    assert_well_formed(many)
+    a, b = one.explored_region(), many.explored_region()
+    tol = sum(k.to_shapely().length for k in kfs) * PRECISION_M
+    assert shapely.symmetric_difference(a, b).area <= tol
+    # the same walls: every obstacle of either lies along an obstacle of the other
+    assert total_length(many, VectorType.OBSTACLE) == pytest.approx(
+        total_length(one, VectorType.OBSTACLE), abs=len(kfs) * 1e-2
+    )
+
+
+def test_two_overlapping_squares_merged_at_once_give_the_union_and_its_walls():
+    pmap = (
+        GridPolyMap(2.0)
+        .merge_many([rect(0, 0, 2, 2, (O, O, F, F)), rect(1, 1, 3, 3, (F, F, F, F))])
+        .map
+    )
+    assert pmap.explored_area() == pytest.approx(7.0)
+    # the first square's bottom and right walls: 2 m + 1 m outside the second square
+    assert total_length(pmap, VectorType.OBSTACLE) == pytest.approx(3.0)
+    assert_well_formed(pmap)
+
+
+def test_merge_many_rejects_an_invalid_polygon_and_leaves_the_map_untouched():
+    pmap = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.0)).map
+    before = dict(pmap.cells)
+    bad = TypedPolygon(Ring([(0, 0), (2, 2), (2, 0), (0, 1)], [O] * 4))
+    with pytest.raises(InvalidPolygonError, match="not simple"):
+        pmap.merge_many([rect(1, 1, 2, 2), bad])
+    assert dict(pmap.cells) == before and pmap.version == 1
+
+
 def test_a_keyframe_whose_ring_collapses_on_a_cell_border_merges():
     # a noise-free scan of a square room from its centre, refined: GEOS's fast rectangle
     # clip raised "Invalid number of points in LinearRing" on one of its cells

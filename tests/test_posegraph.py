@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
+import shapely
 
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
@@ -141,6 +143,13 @@ def test_slam_trajectory_follows_loop_corrections():
     assert err.max() < 0.1
     assert slam.loops_closed > 0
     assert slam.rejected_keyframes == 0
-    assert slam.rebuild_map().explored_region().area == pytest.approx(
+    rebuilt = slam.rebuild_map()  # 8 keyframes a pass
+    assert rebuilt.explored_region().area == pytest.approx(
         slam.map.explored_region().area, rel=0.05
     )
+    one_by_one = PolySlam(replace(cfg.slam, rebuild_batch=1), cfg.map.cell_size_m)
+    one_by_one.store = slam.store
+    apart = shapely.symmetric_difference(
+        one_by_one.rebuild_map().explored_region(), rebuilt.explored_region()
+    ).area
+    assert apart < 0.01 * rebuilt.explored_region().area
