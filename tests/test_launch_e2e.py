@@ -100,7 +100,15 @@ def test_sigint_stops_a_background_launch_and_writes_its_outputs(tmp_path):
             time.sleep(0.5)
             kids = _children_of(proc.pid)
         assert len(kids) == 4, "the launch did not start its processes"
-        time.sleep(5.0)  # the robot is under way
+        # the robot is under way: the coordinator has merged some of its map (a fixed
+        # 5 s wait was too short on a loaded machine, with nothing mapped yet)
+        merged = out / "state" / "coordinator-merged"
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not any(
+            merged.with_suffix(x).exists() for x in (".polymap", ".journal")
+        ):
+            time.sleep(0.5)
+        time.sleep(1.0)
         proc.send_signal(signal.SIGINT)
         t0 = time.monotonic()
         while any(_alive(k) for k in kids) and time.monotonic() - t0 < 10:
