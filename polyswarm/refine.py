@@ -35,6 +35,10 @@ log = logging.getLogger(__name__)
 
 MAX_PREFIX = 512  # longest sub-chain considered at once (vectors); longer walls get 2 lines
 FIRST_WINDOW = 64  # prefixes tried first; grown 4x while the best line fills the window
+# prefixes evaluated together: a block's distance matrices (rows x points) stay in the
+# processor's cache. All 512 prefixes at once took 25.6 ms a call on maze keyframes
+# (2 MB matrices), 4.4 times the time of 256 for twice the prefixes
+ROW_BLOCK = 64
 SCORE_TIE = 0.01  # relative score difference below which the longer sub-chain is kept
 FAR_INTERSECTION_M = 0.15  # an intersection farther than this from the junction is unsafe
 
@@ -120,18 +124,11 @@ def fit_first_line(pts: np.ndarray, cfg: RefineConfig) -> LineFit:
 def _fit_prefixes(pts: np.ndarray, K: int, cfg: RefineConfig) -> LineFit:
     P = pts[: K + 1]
     S = _prefix_sums(P)
-    k = np.arange(1, K + 1)  # prefix of k vectors = points 0..k
-    n1, d1 = _pca_lines(S[1:])  # S[k]
-    D1 = np.abs(n1 @ P.T - d1[:, None])  # (K, K+1): distance of every point to each L1
-    f1 = _first_outlier(D1, k, cfg.inlier_threshold_m)  # C1 = vectors 0..f1-1
-    n2, d2 = _pca_lines(S[f1])
-    D2 = np.abs(n2 @ P.T - d2[:, None])
-    f2 = _first_outlier(D2, f1, cfg.inlier_threshold_m)  # C2 = vectors 0..f2-1
-    S2 = S[f2]
-    e = _sq_error(S2, n2, d2)
+    # prefixes in blocks of ROW_BLOCK: a prefix depends only on its own points, and a
+    # block of prefixes up to k needs the distances to points 0..k only
+    blocks = [_prefix_fits(P, S, lo, min(lo + ROW_BLOCK, K), cfg) for lo in range(0, K, ROW_BLOCK)]
+    f2, n2, S2, score = (np.concatenate(x) for x in zip(*blocks, strict=True))
     n_pts = f2 + 1.0  # unique points of C2
-    w = (n_pts / (n_pts + cfg.score_a)) ** cfg.score_b
-    score = w / (e + cfg.score_c)
     # the highest score; scores within SCORE_TIE of it are statistically the same fit, and
     # then the longest sub-chain wins (w saturates for long chains: without this a
     # straight noisy wall is cut wherever the noise happens to dip)
@@ -139,6 +136,24 @@ def _fit_prefixes(pts: np.ndarray, K: int, cfg: RefineConfig) -> LineFit:
     best = int(np.argmax(np.where(near_best, n_pts, -1)))
     centroid = S2[best, 1:3] / S2[best, 0]
     return LineFit(int(f2[best]), centroid, n2[best], float(score[best]))
+
+
+def _prefix_fits(P: np.ndarray, S: np.ndarray, lo: int, hi: int, cfg: RefineConfig):
+    """Algorithm 3's two fits for the prefixes of lo + 1 .. hi vectors: for each, the
+    vectors kept (f2), the refitted line's normal, the kept points' sums and the score."""
+    k = np.arange(lo + 1, hi + 1)  # prefix of k vectors = points 0..k
+    Pk = P[: hi + 1]
+    n1, d1 = _pca_lines(S[k])
+    D1 = np.abs(n1 @ Pk.T - d1[:, None])  # distance of every point to each L1
+    f1 = _first_outlier(D1, k, cfg.inlier_threshold_m)  # C1 = vectors 0..f1-1
+    n2, d2 = _pca_lines(S[f1])
+    D2 = np.abs(n2 @ Pk.T - d2[:, None])
+    f2 = _first_outlier(D2, f1, cfg.inlier_threshold_m)  # C2 = vectors 0..f2-1
+    S2 = S[f2]
+    e = _sq_error(S2, n2, d2)
+    n_pts = f2 + 1.0
+    w = (n_pts / (n_pts + cfg.score_a)) ** cfg.score_b
+    return f2, n2, S2, w / (e + cfg.score_c)
 
 
 def fit_chain(pts: np.ndarray, cfg: RefineConfig) -> list[tuple[int, int, LineFit]]:
