@@ -12,6 +12,7 @@ import shapely
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
 from polyswarm.loopsearch import correlative_search
+from polyswarm.polymap import Ring, TypedPolygon
 from polyswarm.posegraph import PoseGraph
 from polyswarm.se2 import compose, relative
 from polyswarm.slam import PolySlam
@@ -153,3 +154,16 @@ def test_slam_trajectory_follows_loop_corrections():
         one_by_one.rebuild_map().explored_region(), rebuilt.explored_region()
     ).area
     assert apart < 0.01 * rebuilt.explored_region().area
+
+
+def test_a_rebuild_batch_that_fails_is_merged_one_by_one_and_the_bad_keyframe_counted():
+    cfg = Config()
+    slam = PolySlam(cfg.slam, cfg.map.cell_size_m)
+    for k in range(5):  # five 1 m squares along x, overlapping by half (map frame)
+        slam.store.add((0.5 * k, 0.0, 0.0), rect(0.5 * k, 0.0, 0.5 * k + 1.0, 1.0))
+    # a bow tie (self-intersecting) among them: its batch cannot be merged as a whole
+    bow = TypedPolygon(Ring([(0, 0), (1, 1), (1, 0), (0, 1)], [O] * 4))
+    slam.store.add((0.0, 2.0, 0.0), bow)
+    pmap = slam.rebuild_map()
+    assert slam.rejected_keyframes == 1
+    assert pmap.explored_area() == pytest.approx(3.0)  # x from 0 to 3 m, 1 m wide
