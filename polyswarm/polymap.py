@@ -427,13 +427,7 @@ class GridPolyMap:
         ``options`` (``MergeOptions``) add the sensor-noise aware rules PolySLAM uses;
         without them the merge is the exact union with the laws of the property tests.
         """
-        geom = polygon.validate()
-        s, e, t = polygon.segments()
-        obstacle = t == VectorType.OBSTACLE
-        try:
-            return self._merge_geometry(geom, s[obstacle], e[obstacle], options or MergeOptions())
-        except shapely.errors.GEOSException as err:  # the last net: this map is unchanged
-            raise GeometryError(f"GEOS failed to merge the polygon: {err}") from err
+        return self.merge_many([polygon], options)
 
     def merge_many(
         self, polygons: Sequence[TypedPolygon], options: MergeOptions | None = None
@@ -447,20 +441,18 @@ class GridPolyMap:
         growth one polygon adds is judged together with the others). An invalid polygon
         raises ``InvalidPolygonError`` and the map is unchanged."""
         polygons = list(polygons)
-        if len(polygons) == 1:
-            return self.merge(polygons[0], options)
         if not polygons:
             return MergeResult(self, frozenset())
         geoms = [p.validate() for p in polygons]
         segs = [p.segments() for p in polygons]
-        obstacle = [t == VectorType.OBSTACLE for _, _, t in segs]
-        s = np.concatenate([x[0][o] for x, o in zip(segs, obstacle, strict=True)])
-        e = np.concatenate([x[1][o] for x, o in zip(segs, obstacle, strict=True)])
+        s = np.concatenate([st[t == VectorType.OBSTACLE] for st, _, t in segs])
+        e = np.concatenate([en[t == VectorType.OBSTACLE] for _, en, t in segs])
         try:
-            geom = shapely.union_all(geoms, grid_size=PRECISION_M)
+            geom = geoms[0] if len(geoms) == 1 else shapely.union_all(geoms, grid_size=PRECISION_M)
             return self._merge_geometry(geom, s, e, options or MergeOptions())
         except shapely.errors.GEOSException as err:  # the last net: this map is unchanged
-            raise GeometryError(f"GEOS failed to merge {len(polygons)} polygons: {err}") from err
+            n = len(polygons)
+            raise GeometryError(f"GEOS failed to merge {n} polygon(s): {err}") from err
 
     @classmethod
     def from_polygons(

@@ -367,7 +367,7 @@ def test_merging_many_at_once_is_the_union_of_merging_them_one_by_one(kfs, cell_
     a, b = one.explored_region(), many.explored_region()
     tol = sum(k.to_shapely().length for k in kfs) * PRECISION_M
     assert shapely.symmetric_difference(a, b).area <= tol
-    # the same walls: every obstacle of either lies along an obstacle of the other
+    # the same walls: as long in all (up to rounding at vertices)
     assert total_length(many, VectorType.OBSTACLE) == pytest.approx(
         total_length(one, VectorType.OBSTACLE), abs=len(kfs) * 1e-2
     )
