@@ -186,32 +186,21 @@ class _SegmentFacts:
 
 
 def _cells_around(pmap: GridPolyMap, seg: FrontierSegment, margin_m: float) -> tuple:
-    """(i, j, version) of every cell whose content a segment's facts depend on: within
-    ``margin_m`` of it, and one cell more (the obstacle vectors of neighbouring cells
-    count for clearance)."""
+    """``box_state`` of the cells a segment's facts depend on: within ``margin_m`` of
+    it, and one cell more (the obstacle vectors of neighbouring cells count for
+    clearance)."""
     s = pmap.cell_size
     lo = np.floor((seg.points.min(axis=0) - margin_m) / s).astype(int) - 1
     hi = np.floor((seg.points.max(axis=0) + margin_m) / s).astype(int) + 1
-    return _box_versions(pmap, int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1]))
+    return pmap.box_state(int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1]))
 
 
 def _cells_versions(pmap: GridPolyMap, xy: np.ndarray) -> tuple:
-    """(i, j, version) of the cells within ``GAIN_RADIUS_M`` of a point (a box)."""
+    """``box_state`` of the cells within ``GAIN_RADIUS_M`` of a point (a box)."""
     s, r = pmap.cell_size, GAIN_RADIUS_M
     i0, j0 = math.floor((xy[0] - r) / s), math.floor((xy[1] - r) / s)
     i1, j1 = math.floor((xy[0] + r) / s), math.floor((xy[1] + r) / s)
-    return _box_versions(pmap, i0, j0, i1, j1)
-
-
-def _box_versions(pmap: GridPolyMap, i0: int, j0: int, i1: int, j1: int) -> tuple:
-    """(i, j, version) of the map's cells in the index box [i0, i1] x [j0, j1]."""
-    cells = pmap.cells
-    return tuple(
-        (i, j, c.version)
-        for i in range(i0, i1 + 1)
-        for j in range(j0, j1 + 1)
-        if (c := cells.get((i, j))) is not None
-    )
+    return pmap.box_state(i0, j0, i1, j1)
 
 
 def _segment_facts(

@@ -120,26 +120,29 @@ def chain_vectors(starts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
 
 def split_polyline(points: np.ndarray, max_length: float) -> list[np.ndarray]:
     """Cut a polyline into pieces no longer than ``max_length`` (metres)."""
-    return [piece for piece, _ in _split(points, max_length)]
+    return [piece for piece, _, _ in _split(points, max_length)]
 
 
-def _split(points: np.ndarray, max_length: float) -> list[tuple[np.ndarray, float]]:
-    """``split_polyline`` with each piece's length (metres)."""
+def _split(points: np.ndarray, max_length: float) -> list[tuple[np.ndarray, float, np.ndarray]]:
+    """``split_polyline`` with each piece's length (metres) and midpoint."""
     seg = np.diff(points, axis=0)
     L = np.hypot(seg[:, 0], seg[:, 1])
+    cum = np.concatenate([[0.0], np.cumsum(L)])
     total = float(L.sum())
     if total <= max_length or max_length <= 0:
-        return [(points, total)]
+        half = np.clip(0.5 * total, 0.0, cum[-1])
+        mid = np.array([np.interp(half, cum, points[:, 0]), np.interp(half, cum, points[:, 1])])
+        return [(points, total, mid)]
     k = int(np.ceil(total / max_length))
     cuts = np.linspace(0.0, total, k + 1)
-    cum = np.concatenate([[0.0], np.cumsum(L)])
-    c = np.clip(cuts, 0.0, cum[-1])  # the cut points, as point_along finds them
-    at = np.stack([np.interp(c, cum, points[:, 0]), np.interp(c, cum, points[:, 1])], axis=1)
+    # the cut points and the pieces' midpoints, as point_along finds them
+    d = np.concatenate([cuts, 0.5 * (cuts[:-1] + cuts[1:])])
+    at = np.stack([np.interp(d, cum, points[:, 0]), np.interp(d, cum, points[:, 1])], axis=1)
     out = []
     for m, (a, b) in enumerate(itertools.pairwise(cuts)):
         piece = np.vstack([at[m], points[(cum > a) & (cum < b)], at[m + 1]])
-        d = np.diff(piece, axis=0)
-        out.append((piece, float(np.hypot(d[:, 0], d[:, 1]).sum())))
+        step = np.diff(piece, axis=0)
+        out.append((piece, float(np.hypot(step[:, 0], step[:, 1]).sum()), at[k + 1 + m]))
     return out
 
 
@@ -155,7 +158,9 @@ def extract_frontiers(
     out = []
     for n, chain in enumerate(chain_vectors(s, e)):
         pts = np.vstack([s[chain], e[chain[-1]][None, :]])
-        for piece, length in _split(pts, max_length_m):
+        for piece, length, mid in _split(pts, max_length_m):
             if length >= min_length_m and length > 0:
-                out.append(FrontierSegment(piece, length, n))
+                seg = FrontierSegment(piece, length, n)
+                seg.__dict__["midpoint"] = mid  # the cached property, known already
+                out.append(seg)
     return out

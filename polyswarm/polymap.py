@@ -571,15 +571,20 @@ class GridPolyMap:
         tol = max(
             MATCH_TOL_M, opt.obstacle_snap_m, opt.obstacle_snap_behind_m, opt.obstacle_snap_front_m
         )
-        for i in np.nonzero(covered)[0]:
-            os, oe = cells[i].obstacle_vectors
-            fs, fe = mine[i].vectors_of_type(VectorType.FRONTIER)
-            if len(os) and len(fs):
-                # either way round: a short obstacle on a long frontier, or the reverse
-                covered[i] = not (
-                    _along_obstacles(os, oe, 0.5 * (os + oe), fs, fe, tol).any()
-                    or _along_obstacles(fs, fe, 0.5 * (fs + fe), os, oe, tol).any()
-                )
+        # all covered cells at once: each cell's obstacle vectors against its own
+        # frontiers, either way round (a short obstacle on a long frontier, or the reverse)
+        k = np.nonzero(covered)[0]
+        obst = [cells[i].obstacle_vectors for i in k]
+        front = [mine[i].vectors_of_type(VectorType.FRONTIER) for i in k]
+        o_own = np.repeat(k, [len(o[0]) for o in obst])
+        f_own = np.repeat(k, [len(f[0]) for f in front])
+        if len(o_own) and len(f_own):
+            os, oe = (np.concatenate([o[n] for o in obst]) for n in (0, 1))
+            fs, fe = (np.concatenate([f[n] for f in front]) for n in (0, 1))
+            on = _along_obstacles(os, oe, 0.5 * (os + oe), fs, fe, tol, owners=(o_own, f_own))
+            under = _along_obstacles(fs, fe, 0.5 * (fs + fe), os, oe, tol, owners=(f_own, o_own))
+            covered[o_own[on]] = False
+            covered[f_own[under]] = False
         return [c for c, skip in zip(cells, covered, strict=True) if not skip]
 
     def _candidate_cells(self, bounds) -> list[CellIndex]:
@@ -825,6 +830,31 @@ class GridPolyMap:
             m = np.isin(t, [int(k) for k in kinds])
             s, e, t = s[m], e[m], t[m]
         return s, e, t
+
+    @cached_property
+    def _version_grid(self) -> tuple[int, int, np.ndarray]:
+        """(lowest i, lowest j, the cells' versions over the map's index box; -1: none)."""
+        if not self.cells:
+            return 0, 0, np.full((0, 0), -1, dtype=np.int64)
+        ij = np.array(list(self.cells), dtype=np.int64)
+        lo = ij.min(axis=0)
+        grid = np.full(tuple(ij.max(axis=0) - lo + 1), -1, dtype=np.int64)
+        grid[ij[:, 0] - lo[0], ij[:, 1] - lo[1]] = [c.version for c in self.cells.values()]
+        return int(lo[0]), int(lo[1]), grid
+
+    def box_state(self, i0: int, j0: int, i1: int, j1: int) -> tuple[int, int]:
+        """(cells, highest version) of the cells in the index box [i0, i1] x [j0, j1].
+
+        A changed or new cell takes the map's next version, so from one version of the
+        map to a later one this pair changes whenever a cell in the box was added,
+        changed or removed: a cheap key for what was computed from the box's cells."""
+        li, lj, grid = self._version_grid
+        a, b = max(i0 - li, 0), min(i1 - li + 1, grid.shape[0])
+        c, d = max(j0 - lj, 0), min(j1 - lj + 1, grid.shape[1])
+        if a >= b or c >= d:
+            return 0, -1
+        sub = grid[a:b, c:d]
+        return int(np.count_nonzero(sub >= 0)), int(sub.max())
 
     def cells_within(self, x: float, y: float, radius: float) -> list[CellIndex]:
         s = self.cell_size
@@ -1531,18 +1561,23 @@ def _along_obstacles(
     max_angle_deg: float = 30.0,
     tree: shapely.STRtree | None = None,
     within_ends: bool = False,
+    owners: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Vectors a->b lying along a source obstacle vector (within ``tol`` of its line,
     the middle within ``tol`` of the vector), in the same direction (within
     ``max_angle_deg``). With ``within_ends`` neither end may lie past the source's ends
     by more than ``tol``: a frontier that continues a wall's line past the wall's end
     (the view past a door jamb) is not snapped to that wall. ``tree``: the sources'
-    ``_segment_tree``, if the caller has it."""
+    ``_segment_tree``, if the caller has it. ``owners`` (one id per vector, one per
+    source): only a source of the vector's own id counts (many cells in one call)."""
     hit = np.zeros(len(a), dtype=bool)
     if len(src_starts) == 0 or len(a) == 0:
         return hit
     tree = _segment_tree(src_starts, src_ends) if tree is None else tree
     k, j = tree.query(shapely.points(mid), predicate="dwithin", distance=tol)
+    if owners is not None:
+        same = owners[0][k] == owners[1][j]
+        k, j = k[same], j[same]
     if len(k) == 0:
         return hit
     d = src_ends[j] - src_starts[j]

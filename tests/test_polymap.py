@@ -88,6 +88,36 @@ def test_new_explored_space_removes_a_covered_frontier():
     assert total_length(pmap, VectorType.OBSTACLE) == pytest.approx(1.6 + 1.6 + 0.8 + 0.8)
 
 
+def test_cells_are_judged_one_by_one_in_a_batch():
+    # the map's room reaches 3 cm into cell (1, 0) and ends there in a frontier; one
+    # robot saw the room with its east wall 2 cm before that border, in cell (0, 0),
+    # another saw it reach 2 cm into cell (1, 0), open to the east. Each cell alone
+    # changes nothing; in one batch, cell (0, 0)'s wall, 5 cm from cell (1, 0)'s
+    # frontier, must not count: it is not on a frontier of its own cell
+    big = GridPolyMap(2.0).merge(rect(0.2, 0.2, 2.03, 1.8, (O, F, O, O))).map
+    a = GridPolyMap(2.0).merge(rect(0.3, 0.3, 1.98, 1.7, (O, O, O, O))).map
+    b = GridPolyMap(2.0).merge(rect(0.3, 0.3, 2.02, 1.7, (O, F, O, O))).map
+    cells = [a.cells[(0, 0)], b.cells[(1, 0)]]
+    opt = MergeOptions(obstacle_snap_m=0.08)
+    assert [big._cells_that_change([c], opt) for c in cells] == [[], []]
+    assert big._cells_that_change(cells, opt) == []
+    # while a wall on the frontier of its own cell does count, in a batch too
+    c = GridPolyMap(2.0).merge(rect(0.3, 0.3, 2.01, 1.7, (O, O, O, O))).map
+    assert big._cells_that_change([*cells, c.cells[(1, 0)]], opt) == [c.cells[(1, 0)]]
+
+
+def test_box_state_changes_when_a_cell_of_the_box_changes():
+    pmap = GridPolyMap(2.0).merge(rect(0.2, 0.2, 3.8, 3.8, (O, F, O, O))).map
+    assert pmap.box_state(0, 0, 1, 1) == (4, pmap.version)
+    assert pmap.box_state(5, 5, 9, 9) == (0, -1)  # no cell there
+    before = pmap.box_state(-1, -1, 1, 1)
+    far = pmap.merge(rect(20.2, 0.2, 21.8, 1.8, (O, O, O, F))).map
+    assert far.box_state(-1, -1, 1, 1) == before  # a change elsewhere
+    near = far.merge(rect(3.5, 0.5, 5.5, 1.5, (O, O, O, O))).map
+    assert near.box_state(-1, -1, 1, 1) != before  # cell (1, 0) grew
+    assert near.box_state(0, 0, 2, 0)[0] == 3  # and cell (2, 0) is new
+
+
 def test_obstacle_wins_over_a_coincident_frontier():
     a = GridPolyMap(2.0).merge(rect(0.2, 0.2, 1.0, 1.0, (F, F, F, F))).map
     b = a.merge(rect(0.2, 0.2, 1.0, 1.0, (O, F, F, F))).map
