@@ -1,0 +1,101 @@
+"""The coordinator's cycle on recorded inputs: old code against new in seconds.
+
+    python examples/coordinator_replay.py record trace.pkl [ROBOTS] [SIM_SECONDS]  # 10, 60
+    python examples/coordinator_replay.py replay trace.pkl [REPEATS]
+
+``record`` runs the 10-robot maze exploration in one process (what ``polyswarm bench
+explore --load-robots 10`` measures, about 160 s) and saves every call the coordinator
+got, in order: robots alive, poses, statuses, map deltas and merges, flushes and
+cycles. ``replay`` feeds them to a fresh ``Coordinator`` and prints the cycle time p50 /
+p95 / max (ms, merges since the previous cycle included, the first cycle left out, as
+the benchmark does) and the processor time of all cycles (s, steadier than the
+percentiles on a shared machine), the median over REPEATS replays, and a digest of the targets and
+assignments (same digest: same decisions). The robots do not react to the replayed
+coordinator: its inputs are the recorded ones whatever it decides.
+
+``POLYSWARM_CODE=/other/checkout`` imports the code from another checkout (``git
+worktree add /tmp/old COMMIT``); run both one after the other on the same trace.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+if os.environ.get("POLYSWARM_CODE"):
+    sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in repr(f)]
+    sys.path.insert(0, os.environ["POLYSWARM_CODE"])
+
+import hashlib
+import pickle
+import time
+
+import numpy as np
+
+import agents.coordinator as coordinator_module
+from polyswarm.config import Config
+
+CALLS = ("on_alive", "on_pose", "on_status", "on_robot_delta", "on_robot_merge", "on_robot_map")
+
+
+def record(out: str, robots: int = 10, sim_s: float = 60.0) -> None:
+    from polyswarm.benchmarks.inproc import explore_in_process
+
+    Coordinator = coordinator_module.Coordinator
+    trace: list = []
+    for name in (*CALLS, "flush", "cycle"):
+        inner = getattr(Coordinator, name)
+
+        def wrapper(self, *args, _inner=inner, _name=name):
+            trace.append((_name, args))
+            return _inner(self, *args)
+
+        setattr(Coordinator, name, wrapper)
+    t0 = time.monotonic()
+    run = explore_in_process("data:maze", robots, sim_s, seed=0)
+    starts = {rid: info.start for rid, info in run.coordinator.robots.items()}
+    with open(out, "wb") as f:
+        pickle.dump({"robots": starts, "trace": trace}, f)
+    cycles = sum(1 for n, _ in trace if n == "cycle")
+    print(f"{len(trace)} calls, {cycles} cycles, {time.monotonic() - t0:.0f} s")
+
+
+def replay_once(data: dict) -> tuple[np.ndarray, np.ndarray, str]:
+    coord = coordinator_module.Coordinator(Config(), data["robots"])
+    digest = hashlib.sha256()
+    ids: dict[int, int] = {}  # target ids start from the clock: numbered in order here
+    for name, args in data["trace"]:
+        out = getattr(coord, name)(*args)
+        if name == "cycle":
+            for tid, t in sorted(coord.targets.items()):
+                k = ids.setdefault(tid, len(ids))
+                digest.update(f"{k}:{t.goal.round(6).tolist()}:{t.utility_m:.6f};".encode())
+            for rid, a in sorted(out.assignments.items()):
+                digest.update(f"{rid}>{ids.get(a.target, a.target)};".encode())
+    return np.array(coord.cycle_ms[1:]), np.array(coord.cycle_cpu_ms[1:]), digest.hexdigest()[:12]
+
+
+def replay(path: str, repeats: int = 3) -> None:
+    with open(path, "rb") as f:
+        data = pickle.load(f)
+    rows = []
+    for k in range(repeats):
+        ms, cpu, digest = replay_once(data)
+        rows.append([np.percentile(ms, 50), np.percentile(ms, 95), ms.max(), cpu.sum() / 1e3])
+        print(
+            f"replay {k + 1}: {ms.size} cycles, p50 {rows[-1][0]:.1f} ms, p95 {rows[-1][1]:.1f} "
+            f"ms, max {rows[-1][2]:.1f} ms, processor time {rows[-1][3]:.2f} s, digest {digest}"
+        )
+    p50, p95, mx, cpu_s = np.median(rows, axis=0)
+    print(
+        f"median of {repeats}: p50 {p50:.1f} ms, p95 {p95:.1f} ms, max {mx:.1f} ms, "
+        f"processor time {cpu_s:.2f} s"
+    )
+
+
+if __name__ == "__main__":
+    verb, *rest = sys.argv[1:]
+    if verb == "record":
+        record(rest[0], *(int(rest[1]),) if len(rest) > 1 else (), *map(float, rest[2:3]))
+    else:
+        replay(rest[0], *(int(r) for r in rest[1:2]))
