@@ -782,12 +782,14 @@ class GridPolyMap:
         if len(xy) == 0:
             return []
         ij = np.floor(xy / self.cell_size).astype(np.int64)
-        keys, inv = np.unique(ij, axis=0, return_inverse=True)
-        inv = inv.ravel()
-        order = np.argsort(inv, kind="stable")
-        ends = np.cumsum(np.bincount(inv, minlength=len(keys)))
-        groups = np.split(order, ends[:-1])
-        return list(zip(map(tuple, keys.tolist()), groups, strict=True))
+        # one int64 per cell (i high, j low), sorted: the groups in (i, j) order
+        key = (ij[:, 0] << 32) + (ij[:, 1] + (1 << 31))
+        order = np.argsort(key, kind="stable")
+        first = np.r_[True, key[order][1:] != key[order][:-1]]
+        starts = np.nonzero(first)[0]
+        groups = np.split(order, starts[1:])
+        cells = ij[order[starts]].tolist()
+        return list(zip(map(tuple, cells), groups, strict=True))
 
     def locate(self, x: float, y: float) -> tuple[CellIndex, int] | None:
         """The cell and the index of the convex piece holding the point, or None."""
