@@ -22,6 +22,7 @@ import json
 import logging
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -72,22 +73,36 @@ def agent_paths(state_dir: str | Path, robot_id: str) -> tuple[Path, Path, Path]
     return d / f"{robot_id}.polymap", d / f"{robot_id}.json", d / f"{robot_id}.journal"
 
 
-def _write_meta(meta_path: Path, robot_id: str, pose, version: int) -> None:
+class SavedAgent(NamedTuple):
+    """What an agent resumes from: its map, its last pose in the map frame and the robot
+    base's odometry reading at that pose (None in state written without it)."""
+
+    map: GridPolyMap
+    pose: np.ndarray
+    odom: np.ndarray | None
+
+
+def _write_meta(meta_path: Path, robot_id: str, pose, version: int, odom=None) -> None:
     meta = {"robot": robot_id, "pose": [float(v) for v in pose], "map_version": version}
+    if odom is not None:
+        meta["odom"] = [float(v) for v in odom]
     _atomic_write(meta_path, json.dumps(meta).encode())
 
 
-def save_agent(state_dir: str | Path, robot_id: str, pmap: GridPolyMap, pose) -> None:
-    """A snapshot of the whole map and the pose; the journal starts empty again."""
+def save_agent(state_dir: str | Path, robot_id: str, pmap: GridPolyMap, pose, odom=None) -> None:
+    """A snapshot of the whole map and the pose; the journal starts empty again.
+
+    ``odom``: the robot base's odometry at ``pose``. The base keeps counting while the
+    agent is down, so a restarted agent predicts where the robot went since."""
     map_path, meta_path, journal = agent_paths(state_dir, robot_id)
     save_map(map_path, pmap)
-    _write_meta(meta_path, robot_id, pose, pmap.version)
+    _write_meta(meta_path, robot_id, pose, pmap.version, odom)
     journal.unlink(missing_ok=True)
 
 
-def save_pose(state_dir: str | Path, robot_id: str, pose, version: int) -> None:
+def save_pose(state_dir: str | Path, robot_id: str, pose, version: int, odom=None) -> None:
     """The last pose only (shutdown: the map is already on disk, snapshot plus journal)."""
-    _write_meta(agent_paths(state_dir, robot_id)[1], robot_id, pose, version)
+    _write_meta(agent_paths(state_dir, robot_id)[1], robot_id, pose, version, odom)
 
 
 def _append(journal: Path, delta_bytes: bytes) -> None:
@@ -99,11 +114,13 @@ def _append(journal: Path, delta_bytes: bytes) -> None:
         os.fsync(f.fileno())
 
 
-def journal_delta(state_dir: str | Path, robot_id: str, delta_bytes: bytes, pose, version) -> None:
+def journal_delta(
+    state_dir: str | Path, robot_id: str, delta_bytes: bytes, pose, version, odom=None
+) -> None:
     """Append one encoded delta of the agent's map to its journal, and its pose."""
     _, meta_path, journal = agent_paths(state_dir, robot_id)
     _append(journal, delta_bytes)
-    _write_meta(meta_path, robot_id, pose, version)
+    _write_meta(meta_path, robot_id, pose, version, odom)
 
 
 def _replay_journal(journal: Path, pmap: GridPolyMap) -> GridPolyMap:
@@ -127,8 +144,9 @@ def _replay_journal(journal: Path, pmap: GridPolyMap) -> GridPolyMap:
     return pmap
 
 
-def load_agent(state_dir: str | Path, robot_id: str) -> tuple[GridPolyMap, np.ndarray] | None:
-    """The persisted map (snapshot plus journal) and last pose of ``robot_id``, or None."""
+def load_agent(state_dir: str | Path, robot_id: str) -> SavedAgent | None:
+    """The persisted map (snapshot plus journal), last pose and odometry of ``robot_id``,
+    or None."""
     map_path, meta_path, journal = agent_paths(state_dir, robot_id)
     pmap = load_map(map_path)
     if pmap is None or not meta_path.exists():
@@ -139,10 +157,15 @@ def load_agent(state_dir: str | Path, robot_id: str) -> tuple[GridPolyMap, np.nd
         pose = np.array(meta["pose"], dtype=float)
         if pose.shape != (3,) or not np.isfinite(pose).all():
             raise ValueError(f"bad pose {meta['pose']!r}")
+        odom = meta.get("odom")
+        if odom is not None:
+            odom = np.array(odom, dtype=float)
+            if odom.shape != (3,) or not np.isfinite(odom).all():
+                raise ValueError(f"bad odometry {meta['odom']!r}")
     except (ValueError, KeyError, TypeError, OSError) as e:
         _set_aside(meta_path, e)
         return None
-    return pmap, pose
+    return SavedAgent(pmap, pose, odom)
 
 
 def coordinator_paths(state_dir: str | Path) -> tuple[Path, Path]:

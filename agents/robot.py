@@ -177,9 +177,10 @@ class RobotAgent:
             self.stats.distance_m += float(np.hypot(*(pose[:2] - self._last_odom_xy)))
         self._last_odom_xy = pose[:2]
 
-    def resume(self, pmap: GridPolyMap, pose) -> None:
-        """Continue from a persisted map and pose (the agent was restarted)."""
-        self.slam.resume(pmap, pose)
+    def resume(self, pmap: GridPolyMap, pose, odom=None) -> None:
+        """Continue from a persisted map and pose (the agent was restarted); ``odom``, the
+        odometry reading at that pose, lets SLAM follow the robot's motion since."""
+        self.slam.resume(pmap, pose, odom)
         self.pose = np.array(pose, dtype=float)
 
     @property
@@ -544,9 +545,9 @@ def run_agent(
                 "%s: resumed from %s (map version %d, %.1f m2, pose %s)",
                 robot_id,
                 state_dir,
-                saved[0].version,
-                saved[0].explored_area(),
-                np.round(saved[1], 3).tolist(),
+                saved.map.version,
+                saved.map.explored_area(),
+                np.round(saved.pose, 3).tolist(),
             )
     t_end = time.monotonic() + duration_s if duration_s > 0 else math.inf
     with open_session(session_spec) as session:
@@ -635,7 +636,9 @@ def run_agent(
                 detach()
             bus.close()
             if state_dir:  # the map is on disk already (snapshot and journal): the pose
-                persist.save_pose(state_dir, robot_id, agent.pose, agent.slam.map.version)
+                persist.save_pose(
+                    state_dir, robot_id, agent.pose, agent.slam.map.version, agent.slam.odom
+                )
     return agent
 
 
@@ -649,10 +652,12 @@ def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -
     if wire is not None and state_dir:
         # on disk before anyone has seen it: a restart never reuses a published version
         if agent.journaled == 0 or agent.journaled >= persist.SNAPSHOT_EVERY:
-            persist.save_agent(state_dir, agent.id, agent.slam.map, agent.pose)
+            persist.save_agent(state_dir, agent.id, agent.slam.map, agent.pose, agent.slam.odom)
             agent.journaled = 1
         else:
-            persist.journal_delta(state_dir, agent.id, wire, agent.pose, out.delta.version)
+            persist.journal_delta(
+                state_dir, agent.id, wire, agent.pose, out.delta.version, agent.slam.odom
+            )
             agent.journaled += 1
     _send(bus, me, agent, out, item.stamp_s, item.seq, sink, wire)
 

@@ -103,6 +103,7 @@ class PolySlam:
         self.cfg = cfg
         self.map = GridPolyMap(cell_size_m)
         self.pose = np.array(initial_pose, dtype=float)
+        self.odom: np.ndarray | None = None  # the odometry reading that goes with self.pose
         self.icp = PointToVectorIcp(cfg.icp)
         self.selector = KeyframeSelector(cfg.keyframe_distance_m, cfg.keyframe_angle_rad)
         self._kf_pose: np.ndarray | None = None  # map-frame pose at the last keyframe
@@ -126,9 +127,11 @@ class PolySlam:
         self._steps: list[tuple[int, np.ndarray]] = []  # every scan: (keyframe, offset)
         self._last_loop = self._last_search = -(10**9)  # keyframes of the last loop, search
 
-    def resume(self, pmap: GridPolyMap, pose) -> None:
-        """Continue on a persisted map from the last known pose (an agent restarted where
-        its robot stands): the next scan is a keyframe aligned against that map."""
+    def resume(self, pmap: GridPolyMap, pose, odom=None) -> None:
+        """Continue on a persisted map from the last known pose (an agent restarted): the
+        next scan is a keyframe aligned against that map. ``odom`` is the odometry reading
+        at ``pose``: the robot base counts on while the agent is down, so the robot's motion
+        since is predicted from it. Without it the robot is taken to stand at ``pose``."""
         if abs(pmap.cell_size - self.map.cell_size) > 1e-9:
             raise PolyswarmError(
                 f"persisted map has {pmap.cell_size} m cells, the config {self.map.cell_size} m"
@@ -140,6 +143,9 @@ class PolySlam:
         self.graph = PoseGraph()
         self._steps = []
         self._kf_pose = self._kf_odom = None
+        if odom is not None:
+            self._kf_pose, self._kf_odom = self.pose.copy(), np.array(odom, dtype=float)
+        self.odom = self._kf_odom
         self.selector.last = None
         self._keyframe_requested = True
 
@@ -159,7 +165,7 @@ class PolySlam:
         )
         # 2. keyframe selection
         if not (self.selector.due(odom) or self._keyframe_requested):
-            self.pose = pred
+            self.pose, self.odom = pred, odom
             if self.keep_trajectory:  # as seen from its keyframe, to follow corrections
                 self._steps.append((len(self.graph) - 1, relative(self._kf_pose, pred)))
             return SlamStep(pred, False)
@@ -217,6 +223,7 @@ class PolySlam:
         delta = self.map.delta_since(base) if self.map.version != base else None
         self.pose = np.array([pose[0], pose[1], float(wrap(pose[2]))])
         self._kf_pose, self._kf_odom = self.pose.copy(), odom
+        self.odom = odom
         self.selector.mark(odom)
         self._keyframe_requested = False
         self.keyframes += 1

@@ -103,13 +103,15 @@ def test_agent_state_is_a_snapshot_plus_a_journal_of_deltas(tmp_path):
     c = b.merge(rect(4.5, 0.5, 7.0, 1.5, (O, O, O, F))).map
     persist.save_agent(tmp_path, "r1", a, (1.0, 1.0, 0.0))
     persist.journal_delta(tmp_path, "r1", encode_delta(b.delta_since(a.version)), (3, 1, 0), 2)
-    persist.journal_delta(tmp_path, "r1", encode_delta(c.delta_since(b.version)), (6, 1, 0), 3)
-    pmap, pose = persist.load_agent(tmp_path, "r1")
+    wire = encode_delta(c.delta_since(b.version))
+    persist.journal_delta(tmp_path, "r1", wire, (6, 1, 0), 3, odom=(5.5, 0.2, 0.1))
+    pmap, pose, odom = persist.load_agent(tmp_path, "r1")
     assert pmap.version == c.version and pmap.explored_area() == pytest.approx(c.explored_area())
     assert list(pose) == [6, 1, 0]
+    assert list(odom) == [5.5, 0.2, 0.1]  # the base's reading there: motion since is followed
     journal = tmp_path / "r1.journal"
     journal.write_bytes(journal.read_bytes()[:-5])  # a crash in the middle of the last write
-    pmap, _ = persist.load_agent(tmp_path, "r1")
+    pmap = persist.load_agent(tmp_path, "r1").map
     assert pmap.version == b.version  # the torn delta is lost, the others are not
     persist.save_agent(tmp_path, "r1", c, (6, 1, 0))
     assert not journal.exists()

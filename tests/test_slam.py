@@ -105,3 +105,29 @@ def test_a_robot_turning_at_the_maze_start_has_room_to_plan(shared_data):
     # frontiers filled by the merge, "no path")
     assert isinstance(lengths[base.slam.frontier_range_m], str)
     assert lengths[base.slam.no_return_free_m] == pytest.approx(np.hypot(1.2, 1.2), rel=0.05)
+
+
+def test_a_resumed_slam_follows_the_odometry_of_the_robot_that_moved_while_it_was_down():
+    """An agent killed and restarted resumes from its persisted pose; the robot base kept
+    counting odometry (and moving) meanwhile. With the odometry reading saved beside the
+    pose, the first keyframe after the restart starts where the robot really is."""
+    cfg = Config()
+    w = load_world("rooms")
+    with Simulation(w, cfg.sim, 1) as sim:
+        slam = PolySlam(cfg.slam, cfg.map.cell_size_m, sim.robots[0].pose)
+        sim.set_cmd(0, 0.3, 0.0)
+        for e in sim.run(2.0):
+            slam.process(e.scan, e.odom)
+        saved_map, saved_pose, saved_odom = slam.map, slam.pose.copy(), slam.odom.copy()
+        # the agent is down; the robot drives on and turns
+        sim.set_cmd(0, 0.4, 0.5)
+        events = list(sim.run(3.0))
+        truth = np.array(sim.robots[0].pose)
+    assert np.hypot(*(truth[:2] - saved_pose[:2])) > 0.8  # a real gap to bridge
+    e = events[-1]
+    resumed = PolySlam(cfg.slam, cfg.map.cell_size_m)
+    resumed.resume(saved_map, saved_pose, saved_odom)
+    step = resumed.process(e.scan, e.odom)
+    assert step.keyframe
+    assert np.hypot(*(step.pose[:2] - truth[:2])) < 0.05
+    assert abs(np.remainder(step.pose[2] - truth[2] + np.pi, 2 * np.pi) - np.pi) < 0.02
