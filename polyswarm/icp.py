@@ -174,9 +174,20 @@ class PointToVectorIcp:
             keep = cull_backfaces(starts, ends, sensor)
             starts, ends = starts[keep], ends[keep]
         index = VectorIndex.build(starts, ends, cfg.sample_spacing_m)
+        start = pose
         if cfg.rotation_search_rad > 0 and index.tree is not None and len(points) >= MIN_INLIERS:
-            pose = self._best_start(points, pose, starts, ends, index)
-        return self.align_index(points, pose, index)
+            start = self._best_start(points, pose, starts, ends, index)
+        res = self.align_index(points, start, index)
+        if not np.array_equal(start, pose):
+            # the search scores headings coarsely (points within SEARCH_RADIUS_M); where it
+            # moved the start, ICP from the prediction competes: a converged fit beats one
+            # still oscillating, then more inliers win. (On orebro, a junction seen from a
+            # new corridor drew the search 8 degrees off; that fit never converged, the
+            # prediction's did, 1 degree from the reference.)
+            alt = self.align_index(points, pose, index)
+            if (alt.converged, alt.inliers) > (res.converged, res.inliers):
+                return alt
+        return res
 
     def _best_start(self, points, pose, starts, ends, index: VectorIndex) -> np.ndarray:
         """The start pose with the most scan points near the map among a few headings:

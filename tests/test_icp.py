@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from polyswarm.config import IcpConfig
-from polyswarm.icp import PointToVectorIcp, cull_backfaces
+from polyswarm.icp import PointToVectorIcp, VectorIndex, cull_backfaces
 from polyswarm.raycast import cast_rays
 
 ANGLES = np.linspace(-2.35, 2.35, 720)
@@ -68,3 +68,28 @@ def test_backface_culling_keeps_the_near_side_of_a_thin_wall():
     start = true + np.array([0.0, 0.08, 0.0])  # halfway between the faces
     with_cull = PointToVectorIcp(IcpConfig()).align(pts, start, s, e)
     assert with_cull.pose[1] == pytest.approx(0.0, abs=0.01)
+
+
+def test_a_searched_start_competes_with_the_prediction(monkeypatch):
+    """Where the heading search moves the start, ICP also runs from the prediction and
+    the better fit (converged first, then more inliers) is kept, whichever start won."""
+    s, e = room()
+    true = np.array([3.0, 1.5, 0.3])
+    pts = scan_at(true, s, e)
+    icp = PointToVectorIcp(IcpConfig())
+    index = VectorIndex.build(s, e, 0.05)
+    # the search lured 1 rad off: from there ICP never settles (it would be kept alone)
+    lured = true + np.array([0.0, 0.0, 1.0])
+    assert not icp.align_index(pts, lured, index).converged
+    monkeypatch.setattr(PointToVectorIcp, "_best_start", lambda self, p, pose, *a: lured)
+    res = icp.align(pts, true + np.array([0.05, -0.05, 0.02]), s, e)
+    assert res.converged and abs(res.pose[2] - true[2]) < np.radians(0.1)
+    # the prediction 0.8 rad off settles on a wrong fit of a dozen points; the search
+    # found the heading, and its fit of hundreds of points is kept
+    far = true + np.array([0.0, 0.0, 0.8])
+    wrong = icp.align_index(pts, far, index)
+    assert wrong.converged and wrong.inliers < 50
+    monkeypatch.setattr(PointToVectorIcp, "_best_start", lambda self, p, pose, *a: true)
+    res = icp.align(pts, far, s, e)
+    assert res.converged and res.inliers > 500
+    assert abs(res.pose[2] - true[2]) < np.radians(0.1)
