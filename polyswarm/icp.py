@@ -53,6 +53,10 @@ class IcpResult:
     rmse_m: float
     converged: bool
     degenerate_axis: np.ndarray | None  # world-frame unit vector kept from the prediction
+    # the fit's heading std from its last Gauss-Newton step (sigma^2 (J^T J)^-1 with sigma
+    # the point-to-vector RMSE): scan noise only, so optimistic, but it grows where few
+    # points or one wall direction pin the heading down (a junction seen from a corridor)
+    heading_sigma_rad: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -224,6 +228,7 @@ class PointToVectorIcp:
         axis = None
         converged = False
         n_in, rmse = 0, math.inf
+        heading_sigma = math.inf
         it = 0
         while it < cfg.max_iterations:
             it += 1
@@ -243,6 +248,7 @@ class PointToVectorIcp:
             # dtheta * perp(p - s) with perp(v) = (-v_y, v_x)
             J = np.column_stack([nrm, -nrm[:, 0] * arm[:, 1] + nrm[:, 1] * arm[:, 0]])
             delta, axis = _solve(J, r, cfg.degeneracy_ratio)
+            heading_sigma = _heading_sigma(J, rmse, axis is not None)
             pose[0] += delta[0]
             pose[1] += delta[1]
             pose[2] = float(wrap(pose[2] + delta[2]))
@@ -253,7 +259,7 @@ class PointToVectorIcp:
                 converged = True
                 break
             threshold = max(cfg.outlier_end_m, threshold * cfg.shrink)
-        return IcpResult(pose, it, n_in, rmse, converged, axis)
+        return IcpResult(pose, it, n_in, rmse, converged, axis, heading_sigma)
 
     def _correspond(
         self, world: np.ndarray, tangents: np.ndarray, index: VectorIndex, threshold: float
@@ -294,6 +300,21 @@ class PointToVectorIcp:
         # unit normal pointing to the free side (left of the vector)
         nrm = np.stack([-d[inl, 1], d[inl, 0]], axis=1) / np.where(L > 0, L, 1.0)[:, None]
         return p[inl], c[inl], nrm
+
+
+def _heading_sigma(J: np.ndarray, rmse: float, weak: bool) -> float:
+    """Std of the heading from the normal equations, sigma^2 (J^T J)^-1 (translation
+    along a ``weak`` (degenerate) axis left out: there it comes from the odometry)."""
+    H = J.T @ J
+    _, vec = np.linalg.eigh(H[:2, :2])
+    B = np.zeros((3, 2 if weak else 3))  # the constrained directions
+    B[:2, : B.shape[1] - 1] = vec[:, 1:] if weak else vec
+    B[2, -1] = 1.0
+    try:
+        cov = np.linalg.inv(B.T @ H @ B) * max(rmse, 1e-3) ** 2
+    except np.linalg.LinAlgError:
+        return math.inf
+    return float(math.sqrt(max(cov[-1, -1], 0.0)))
 
 
 def _solve(J: np.ndarray, r: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray | None]:

@@ -126,6 +126,7 @@ class PolySlam:
         self.keep_trajectory = keep_trajectory
         self._steps: list[tuple[int, np.ndarray]] = []  # every scan: (keyframe, offset)
         self._last_loop = self._last_search = -(10**9)  # keyframes of the last loop, search
+        self._travel_since_loop_m = 0.0  # distance driven since the last loop edge
 
     def resume(self, pmap: GridPolyMap, pose, odom=None) -> None:
         """Continue on a persisted map from the last known pose (an agent restarted): the
@@ -258,37 +259,49 @@ class PolySlam:
         weak = None  # a corridor: along it the edge is only as good as the odometry
         if tracked and res.degenerate_axis is not None:
             weak = _rotate(res.degenerate_axis, -prev[2])
+        sigma_rad = lc.odometry_sigma_rad
+        if tracked:
+            sigma_rad = max(
+                lc.tracking_sigma_rad, lc.heading_sigma_inflation * res.heading_sigma_rad
+            )
         self.graph.add_edge(
             node - 1,
             node,
             z,
             lc.tracking_sigma_m if tracked else lc.odometry_sigma_m,
-            lc.tracking_sigma_rad if tracked else lc.odometry_sigma_rad,
+            sigma_rad,
             weak_axis=weak,
             weak_sigma_m=lc.odometry_sigma_m + ODOMETRY_SIGMA_PER_M * float(np.hypot(*z[:2])),
         )
+        self._travel_since_loop_m += float(np.hypot(*z[:2]))
         if not lc.enabled or len(valid) == 0:
             return pose
+        # how far tracking may have drifted since the last loop: the wide search's window
+        window = lc.search_window(self._travel_since_loop_m)
         # the old submap: keyframes near the pose, all older than min_age_keyframes
         old = self.store.nearest(
-            pose, node - lc.min_age_keyframes, radius_m=lc.radius_m, limit=lc.keyframes
+            pose,
+            node - lc.min_age_keyframes,
+            radius_m=lc.radius_m + window - lc.search_window_m,
+            limit=lc.keyframes,
         )
         if len(old) == 0:
             return pose
         s, e = self.store.vectors(old)
         m = self.icp.align(valid, pose, s, e, origin)
-        ok = self._loop_accepted(m, pose, len(valid))
+        ok = self._loop_accepted(m, pose, len(valid), window)
         waited = min(node - self._last_loop, node - self._last_search)
         if not ok and lc.search_window_m > 0 and waited >= lc.search_every_keyframes:
             # tracking may have drifted beyond ICP's reach: search a wide window first
             self._last_search = node
-            start, _, ambiguous = correlative_search(valid, pose, s, e, lc.search_window_m)
+            start, _, ambiguous = correlative_search(valid, pose, s, e, window)
             if not ambiguous:
                 m = self.icp.align(valid, start, s, e, origin)
-                ok = self._loop_accepted(m, pose, len(valid))
+                ok = self._loop_accepted(m, pose, len(valid), window)
         if not ok:
             return pose
         self._last_loop = node
+        self._travel_since_loop_m = 0.0
         shift = float(np.hypot(*(m.pose[:2] - pose[:2])))
         anchor = int(old[0])
         anchor_pose = self.store.keyframes[anchor].pose
@@ -317,13 +330,14 @@ class PolySlam:
         log.debug("loop %d -> %d closed: moved %.3f m, %.2f deg", anchor, node, shift, turn)
         return poses[-1]
 
-    def _loop_accepted(self, m: IcpResult, pose, n_points: int) -> bool:
+    def _loop_accepted(self, m: IcpResult, pose, n_points: int, window_m: float) -> bool:
         lc = self.cfg.loop_closure
         return bool(
             m.converged
             and m.inliers >= lc.min_inlier_fraction * n_points
             and m.rmse_m <= lc.max_rmse_m
-            and np.hypot(*(m.pose[:2] - pose[:2])) <= lc.max_correction_m
+            and np.hypot(*(m.pose[:2] - pose[:2]))
+            <= lc.max_correction_m + window_m - lc.search_window_m
         )
 
     @property

@@ -93,3 +93,19 @@ def test_a_searched_start_competes_with_the_prediction(monkeypatch):
     res = icp.align(pts, far, s, e)
     assert res.converged and res.inliers > 500
     assert abs(res.pose[2] - true[2]) < np.radians(0.1)
+
+
+def test_heading_std_grows_when_few_points_pin_the_heading():
+    """IcpResult.heading_sigma_rad: the whole room pins the heading down; a few points
+    on two walls near a corner do so far less (the pose graph weighs its edge by it)."""
+    s, e = room()
+    true = np.array([3.0, 1.5, 0.3])
+    pts = scan_at(true, s, e)
+    icp = PointToVectorIcp(IcpConfig())
+    whole = icp.align(pts, true + np.array([0.02, -0.02, 0.01]), s, e)
+    world = pts @ np.array([[np.cos(0.3), np.sin(0.3)], [-np.sin(0.3), np.cos(0.3)]]) + true[:2]
+    corner = pts[np.hypot(world[:, 0] - 6.0, world[:, 1] - 0.0) < 1.2]
+    assert 20 <= len(corner) <= 120
+    few = icp.align(corner, true + np.array([0.02, -0.02, 0.01]), s, e)
+    assert 0 < whole.heading_sigma_rad < np.radians(0.05)
+    assert few.heading_sigma_rad > 3 * whole.heading_sigma_rad

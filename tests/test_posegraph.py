@@ -167,3 +167,21 @@ def test_a_rebuild_batch_that_fails_is_merged_one_by_one_and_the_bad_keyframe_co
     pmap = slam.rebuild_map()
     assert slam.rejected_keyframes == 1
     assert pmap.explored_area() == pytest.approx(3.0)  # x from 0 to 3 m, 1 m wide
+
+
+def test_the_wide_search_grows_with_the_distance_since_the_last_loop():
+    lc = Config().slam.loop_closure
+    assert lc.search_window(0.0) == lc.search_window_m  # 2 m just after a loop
+    assert lc.search_window(100.0) == pytest.approx(3.0)  # 3 % of the distance driven
+    assert lc.search_window(1000.0) == lc.max_search_window_m  # at most 5 m
+    # a scan 3.5 m from where tracking put it (aces drifted 2-3 m over 160 m without a
+    # loop): out of the 2 m window, found in the grown one
+    s, e = room()
+    true = np.array([3.0, 1.5, 0.3])
+    pts = scan_at(true, s, e)
+    tracked = true + np.array([2.5, -2.4, 0.03])
+    found, _, ambiguous = correlative_search(pts, tracked, s, e, lc.search_window(200.0))
+    assert not ambiguous
+    assert np.hypot(*(found - true)[:2]) < 0.1
+    found, _, _ = correlative_search(pts, tracked, s, e, lc.search_window(0.0))
+    assert np.hypot(*(found - true)[:2]) > 1.0
