@@ -13,7 +13,8 @@
     before a second to any (given the targets' chains);
   - ``greedy``: Burgard-style sequential cost-utility with utility discounted around
     targets already taken;
-  - ``nearest``: explore_lite-style, every robot its own best target, no coordination.
+  - ``nearest``: the explore_lite-style baseline, every robot its own nearest target
+    (path length; utility breaks ties only), no coordination.
   All keep a robot's current target unless another is clearly better (hysteresis).
 
     targets = frontier_targets(merged, graph, min_length_m=0.4, max_length_m=4.0)
@@ -46,6 +47,12 @@ FALLBACK_GRAZING_PENALTY_M = 10.0  # ... (a grazing view counts as this much far
 UTILITY_CAP_M = 6.0  # a frontier longer than this is worth no more
 UTILITY_WEIGHT = 1.0  # metres of path a metre of frontier is worth
 UNREACHABLE = math.inf
+# ``nearest`` ranks by path length alone, as the issue's baseline and its reference's
+# nearest-frontier planner do; utility only breaks ties (a metre of utility counts as a
+# millimetre of path). With the full cost - utility (the area behind a frontier
+# included), uncoordinated robots already spread out, which is the coordination the
+# baseline is there to lack.
+NEAREST_TIE_WEIGHT = 1e-3
 # A frontier with explored space this close behind it (on its unexplored side) along
 # most (SLIVER_SHARE) of its length borders a sliver, not unexplored space: the thin
 # leftovers of keyframe fans, which walls keep from being filled (MergeOptions
@@ -514,7 +521,7 @@ def assign(
             c[r, t] *= hysteresis
     reachable = np.isfinite(c)
     if strategy == Strategy.NEAREST:
-        score = np.where(reachable, c - UTILITY_WEIGHT * util[None, :], np.inf)
+        score = np.where(reachable, c - NEAREST_TIE_WEIGHT * util[None, :], np.inf)
         return [int(np.argmin(s)) if np.isfinite(s).any() else None for s in score]
     if strategy == Strategy.GREEDY:
         return _greedy(c, util, goals, separation_m)

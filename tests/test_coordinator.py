@@ -43,6 +43,18 @@ def test_hungarian_minimises_the_total_cost():
     assert assign(Strategy.NEAREST, costs, [0.0, 0.0]) == [0, 0]
 
 
+def test_nearest_takes_the_nearest_target_whatever_its_utility():
+    # target 1 is 2 m farther but borders a big unexplored room (utility 40 m)
+    costs = np.array([[3.0, 5.0, 3.0], [4.0, 6.0, 4.0]])
+    util = [1.0, 40.0, 2.0]
+    assert assign(Strategy.HUNGARIAN, costs[:1], util) == [1]
+    # both robots go to the nearest; between the two equally near, the more useful one
+    assert assign(Strategy.NEAREST, costs, util) == [2, 2]
+    # a robot keeps its target unless another is clearly nearer (hysteresis 0.8)
+    assert assign(Strategy.NEAREST, np.array([[3.0, 3.6, 3.0]]), util, [1]) == [1]
+    assert assign(Strategy.NEAREST, np.array([[3.0, 3.9, 3.0]]), util, [1]) == [2]
+
+
 def test_hungarian_sends_one_robot_per_frontier_before_a_second_to_any():
     # targets 0 and 1 are pieces of one frontier (a corridor ahead of both robots),
     # target 2 the only piece of another frontier, farther away
