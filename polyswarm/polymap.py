@@ -651,8 +651,13 @@ class GridPolyMap:
         # a border vector must end where explored space across the border starts or ends,
         # so that only its part facing unexplored space stays a frontier
         # (only around regions that moved: the others were noded when they last changed)
-        moved = {i for i, r, o in zip(idxs, regions, old, strict=True) if r is not o}
-        need = moved | {n for i in moved for n in _neighbours(i)}
+        k_moved = [k for k, (r, o) in enumerate(zip(regions, old, strict=True)) if r is not o]
+        moved = {idxs[k] for k in k_moved}
+        # a neighbour reads a moved region only where it meets their shared border: it is
+        # typed and noded again only if that changed
+        need = moved | _across_changed_borders(
+            [idxs[k] for k in k_moved], old[k_moved], regions[k_moved], self.cell_size
+        )
         # obstacle sources: the new polygon's obstacle vectors and the old ones of these cells
         olds = [self.cells[i].obstacle_vectors for i in idxs if i in self.cells]
         starts = np.concatenate([src_starts.reshape(-1, 2)] + [o[0] for o in olds])
@@ -1018,6 +1023,63 @@ def fill_notches(cell: Cell, depth_m: float) -> Cell:
 def _neighbours(ix: CellIndex) -> tuple[CellIndex, ...]:
     i, j = ix
     return ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1))
+
+
+# the sides of a cell (bottom, right, top, left): the axis their line is fixed on, whether
+# it is the cell's upper bound on that axis, and the neighbour across
+_SIDES = ((1, 0, (0, -1)), (0, 1, (1, 0)), (1, 1, (0, 1)), (0, 0, (-1, 0)))
+
+
+def _border_keys(geoms: np.ndarray, idxs: list[CellIndex], size: float) -> list[list[bytes]]:
+    """Per region and side of its cell: what a neighbour across that side reads of it
+    (``_node_borders``: its vertices on the side's line; ``_border_cover``: its edges
+    along that line), as bytes that are equal when the two regions read the same."""
+    keys = [[b""] * 4 for _ in idxs]
+    if not len(geoms):
+        return keys
+    parts, part_of = shapely.get_parts(geoms, return_index=True)
+    rings, ring_of = shapely.get_rings(parts, return_index=True)
+    xy, coord_of = shapely.get_coordinates(rings, return_index=True)
+    own = part_of[ring_of[coord_of]]
+    ij = np.array(idxs, dtype=np.int64).reshape(-1, 2)[own]
+    next_same = np.r_[coord_of[1:] == coord_of[:-1], False]  # vertex k+1 on k's ring
+    for side, (ax, far, _) in enumerate(_SIDES):
+        on = np.abs(xy[:, ax] - (ij[:, ax] + far) * size) <= BORDER_TOL_M
+        t = xy[:, 1 - ax]
+        along = np.nonzero(on & np.r_[on[1:], False] & next_same)[0]
+        lo = np.minimum(t[along], t[along + 1])
+        hi = np.maximum(t[along], t[along + 1])
+        v = np.nonzero(on)[0]
+        # vertices (kind 0) and edges (kind 1) of each region, in a canonical order
+        g = np.concatenate([own[v], own[along]])
+        kind = np.concatenate([np.zeros(len(v)), np.ones(len(along))])
+        a = np.concatenate([t[v], lo])
+        b = np.concatenate([t[v], hi])
+        if not len(g):
+            continue
+        order = np.lexsort((b, a, kind, g))
+        g, rows = g[order], np.stack([kind, a, b], axis=1)[order]
+        cut = np.nonzero(np.r_[True, g[1:] != g[:-1]])[0]
+        for start, end in zip(cut, [*cut[1:], len(g)], strict=True):
+            keys[g[start]][side] = rows[start:end].tobytes()
+    return keys
+
+
+def _across_changed_borders(
+    idxs: list[CellIndex], old: np.ndarray, new: np.ndarray, size: float
+) -> set[CellIndex]:
+    """The neighbours of cells whose region changed from ``old`` to ``new`` along the
+    border they share (so their border vectors may need new nodes or types)."""
+    if not idxs:
+        return set()
+    before = _border_keys(old, idxs, size)
+    after = _border_keys(new, idxs, size)
+    return {
+        (ix[0] + step[0], ix[1] + step[1])
+        for ix, kb, ka in zip(idxs, before, after, strict=True)
+        for (_, _, step), b, a in zip(_SIDES, kb, ka, strict=True)
+        if a != b
+    }
 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:

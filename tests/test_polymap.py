@@ -21,6 +21,7 @@ from polyswarm.polymap import (
     Ring,
     TypedPolygon,
     VectorType,
+    _across_changed_borders,
     _obstacle_mask,
     _segment_tree,
     cells_digest,
@@ -611,3 +612,23 @@ def test_a_frontier_continuing_past_a_wall_end_is_not_snapped_to_the_wall():
     b = np.array([[1.12, 0.96], [0.8, 0.975]])
     snapped = _obstacle_mask(a, b, wall_s, wall_e, tree, obstacle_snap_m=0.05)
     assert snapped.tolist() == [False, True]
+
+
+def test_only_neighbours_across_a_changed_border_are_read_again():
+    # cell (0, 0) of a 2 m grid: explored space grows inside, then up to its right border
+    a = shapely.box(0.5, 0.5, 1.0, 1.0)
+    inside = shapely.box(0.5, 0.5, 1.5, 1.5)
+    to_right = shapely.box(0.5, 0.5, 2.0, 1.5)
+    old = np.array([a, inside], dtype=object)
+    new = np.array([inside, to_right], dtype=object)
+    assert _across_changed_borders([(0, 0)], old[:1], new[:1], 2.0) == set()
+    assert _across_changed_borders([(0, 0)], old[1:], new[1:], 2.0) == {(1, 0)}
+    # a region already on its top border that only moves its inner edges: the top
+    # neighbour reads the same edge along y = 2 m
+    on_top = shapely.box(0.5, 1.0, 1.5, 2.0)
+    taller = shapely.Polygon([(0.5, 0.8), (1.5, 1.0), (1.5, 2.0), (0.5, 2.0)])
+    assert _across_changed_borders([(0, 0)], np.array([on_top]), np.array([taller]), 2.0) == set()
+    # a new region touching the left border at one corner point only (a vertex on it)
+    corner = shapely.Polygon([(0.0, 1.0), (1.0, 0.5), (1.0, 1.5)])
+    got = _across_changed_borders([(0, 0)], np.array([shapely.Polygon()]), np.array([corner]), 2.0)
+    assert got == {(-1, 0)}
