@@ -22,7 +22,7 @@ def sim_cmd(
     seed: int = typer.Option(0, help="Seed for noise, procedural maze and wandering."),
     gui: bool = typer.Option(False, "--gui", help="Open the pybullet GUI (needs a display)."),
     out: Path | None = typer.Option(None, help="Write a PNG of the world and trajectories here."),
-    config: Path | None = typer.Option(None, help="TOML config (the [sim] section is used)."),
+    config: Path | None = typer.Option(None, help="TOML config (its sim table is used)."),
     serve: bool = typer.Option(
         False, "--serve", help="Serve on Zenoh: publish scans and odometry, obey cmd_vel."
     ),
@@ -36,7 +36,8 @@ def sim_cmd(
     ),
 ) -> None:
     """Drive robots with a reactive wander controller and report what happened; with
-    --serve, run the simulation for robot agents over Zenoh (robots from [[robots]])."""
+    --serve, run the simulation for robot agents over Zenoh (robots from the config's
+    robots table, else --robots spread over the start area)."""
     import time
 
     import numpy as np
