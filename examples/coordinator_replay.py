@@ -9,9 +9,13 @@ got, in order: robots alive, poses, statuses, map deltas and merges, flushes and
 cycles. ``replay`` feeds them to a fresh ``Coordinator`` and prints the cycle time p50 /
 p95 / max (ms, merges since the previous cycle included, the first cycle left out, as
 the benchmark does) and the processor time of all cycles (s, steadier than the
-percentiles on a shared machine), the median over REPEATS replays, and a digest of the targets and
-assignments (same digest: same decisions). The robots do not react to the replayed
-coordinator: its inputs are the recorded ones whatever it decides.
+percentiles on a shared machine), the median over REPEATS replays, a digest of the
+targets and assignments (same digest: same decisions) and one of the merged map's cells
+at the end (same digest: the same map, bit for bit). The robots' recorded merges are
+replayed too, each checked against the digest its robot sent: a merge that now comes
+out differently is counted as refused (0 when the merge code is unchanged in effect).
+The robots do not react to the replayed coordinator: its inputs are the recorded ones
+whatever it decides.
 
 ``POLYSWARM_CODE=/other/checkout`` imports the code from another checkout (``git
 worktree add /tmp/old COMMIT``); run both one after the other on the same trace.
@@ -34,6 +38,8 @@ import numpy as np
 
 import agents.coordinator as coordinator_module
 from polyswarm.config import Config
+from polyswarm.errors import MapError
+from polyswarm.polymap import cells_digest
 
 CALLS = ("on_alive", "on_pose", "on_status", "on_robot_delta", "on_robot_merge", "on_robot_map")
 
@@ -60,19 +66,26 @@ def record(out: str, robots: int = 10, sim_s: float = 60.0) -> None:
     print(f"{len(trace)} calls, {cycles} cycles, {time.monotonic() - t0:.0f} s")
 
 
-def replay_once(data: dict) -> tuple[np.ndarray, np.ndarray, str]:
+def replay_once(data: dict) -> tuple[np.ndarray, np.ndarray, str, int]:
     coord = coordinator_module.Coordinator(Config(), data["robots"])
     digest = hashlib.sha256()
     ids: dict[int, int] = {}  # target ids start from the clock: numbered in order here
+    refused = 0
     for name, args in data["trace"]:
-        out = getattr(coord, name)(*args)
+        try:
+            out = getattr(coord, name)(*args)
+        except MapError:  # a robot's merge that replays differently, or a gap after it
+            refused += 1
+            continue
         if name == "cycle":
             for tid, t in sorted(coord.targets.items()):
                 k = ids.setdefault(tid, len(ids))
                 digest.update(f"{k}:{t.goal.round(6).tolist()}:{t.utility_m:.6f};".encode())
             for rid, a in sorted(out.assignments.items()):
                 digest.update(f"{rid}>{ids.get(a.target, a.target)};".encode())
-    return np.array(coord.cycle_ms[1:]), np.array(coord.cycle_cpu_ms[1:]), digest.hexdigest()[:12]
+    digest.update(f"map {cells_digest(coord.merged.cells.values()):08x}".encode())
+    ms, cpu = np.array(coord.cycle_ms[1:]), np.array(coord.cycle_cpu_ms[1:])
+    return ms, cpu, digest.hexdigest()[:12], refused
 
 
 def replay(path: str, repeats: int = 3) -> None:
@@ -80,11 +93,12 @@ def replay(path: str, repeats: int = 3) -> None:
         data = pickle.load(f)
     rows = []
     for k in range(repeats):
-        ms, cpu, digest = replay_once(data)
+        ms, cpu, digest, refused = replay_once(data)
         rows.append([np.percentile(ms, 50), np.percentile(ms, 95), ms.max(), cpu.sum() / 1e3])
         print(
             f"replay {k + 1}: {ms.size} cycles, p50 {rows[-1][0]:.1f} ms, p95 {rows[-1][1]:.1f} "
-            f"ms, max {rows[-1][2]:.1f} ms, processor time {rows[-1][3]:.2f} s, digest {digest}"
+            f"ms, max {rows[-1][2]:.1f} ms, processor time {rows[-1][3]:.2f} s, digest {digest}, "
+            f"robot updates refused {refused}"
         )
     p50, p95, mx, cpu_s = np.median(rows, axis=0)
     print(
