@@ -81,3 +81,17 @@ def test_known_errors_are_one_line_and_exit_1(tmp_path):
     assert p.returncode == 1 and "error:" in p.stderr
     p = run("map", "export", str(bad), "-o", str(tmp_path / "x.bmp"), check=False)
     assert p.returncode == 1
+
+
+def test_log_lines_go_to_standard_error():
+    # `bench ... --json` prints its JSON on standard output; a warning logged during the
+    # run (the 10-robot load test logs some) must not land in it
+    code = (
+        "import logging; from polyswarm.cli import setup_logging; "
+        "setup_logging(logging.INFO); logging.getLogger('polyswarm.x').warning('a log line')"
+    )
+    p = subprocess.run(
+        [sys.executable, "-c", code], check=True, capture_output=True, text=True, timeout=60
+    )
+    assert "a log line" in p.stderr
+    assert p.stdout == ""

@@ -70,11 +70,16 @@ def exit_now(code: int = 0) -> NoReturn:
 
 
 def setup_logging(level: int) -> None:
+    """Log lines go to standard error, so that ``--json`` output on standard output stays
+    machine-readable whatever is logged."""
+    from rich.console import Console
     from rich.logging import RichHandler
 
     root = logging.getLogger()
     if not any(isinstance(h, RichHandler) for h in root.handlers):
-        handler = RichHandler(show_path=False, rich_tracebacks=False, markup=False)
+        handler = RichHandler(
+            console=Console(stderr=True), show_path=False, rich_tracebacks=False, markup=False
+        )
         handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
         root.addHandler(handler)
     root.setLevel(level)
