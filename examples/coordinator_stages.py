@@ -4,8 +4,9 @@
 
 Runs what ``polyswarm bench explore --worlds "" --load-robots 10`` runs (10 robots on
 the maze, in one process) and prints, per coordinator cycle, the time spent merging
-robot cells, updating the navigation graph, finding frontier targets and computing
-path costs (p50 and p95 of each, milliseconds), and how much work was skipped: robot
+robot cells, updating the navigation graph, finding frontier targets (and within that:
+extracting the frontier vectors, their facts, the unexplored area behind them) and
+computing path costs (p50 and p95 of each, milliseconds), and how much work was skipped: robot
 cells that could not change the merged map, frontiers whose facts were reused. To
 compare two versions side by side, run it from both checkouts at once
 (``PYTHONPATH=/path/to/other/checkout python examples/coordinator_stages.py``; the
@@ -89,6 +90,10 @@ def main(sim_s: float = 60.0) -> None:
         return segs
 
     explore_module.extract_frontiers = counted_extract
+    # the parts of ``targets``
+    timed(explore_module, "extract_frontiers", "extract")
+    timed(explore_module, "_segment_facts", "facts")
+    timed(explore_module, "unexplored_behind", "behind")
     rows: list[dict] = []
     cycle = Coordinator.cycle
 
@@ -102,7 +107,7 @@ def main(sim_s: float = 60.0) -> None:
     explore_in_process("data:maze", 10, sim_s, seed=0)
     rows = rows[1:]  # the first cycle merges the robots' first scans
     print(f"{len(rows)} cycles, 10 robots, maze, {sim_s:.0f} simulated s")
-    for stage in ("total", "merge", "graph", "targets", "costs"):
+    for stage in ("total", "merge", "graph", "targets", "extract", "facts", "behind", "costs"):
         v = np.array([r.get(stage, 0.0) for r in rows])
         print(
             f"{stage:>8}: p50 {np.percentile(v, 50):6.1f} ms   p95 {np.percentile(v, 95):6.1f} ms"

@@ -652,11 +652,11 @@ class GridPolyMap:
         # so that only its part facing unexplored space stays a frontier
         # (only around regions that moved: the others were noded when they last changed)
         k_moved = [k for k, (r, o) in enumerate(zip(regions, old, strict=True)) if r is not o]
-        moved = {idxs[k] for k in k_moved}
+        moved = [idxs[k] for k in k_moved]
         # a neighbour reads a moved region only where it meets their shared border: it is
         # typed and noded again only if that changed
-        need = moved | _across_changed_borders(
-            [idxs[k] for k in k_moved], old[k_moved], regions[k_moved], self.cell_size
+        need = set(moved) | _across_changed_borders(
+            moved, old[k_moved], regions[k_moved], self.cell_size
         )
         # obstacle sources: the new polygon's obstacle vectors and the old ones of these cells
         olds = [self.cells[i].obstacle_vectors for i in idxs if i in self.cells]

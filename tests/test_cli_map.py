@@ -86,12 +86,14 @@ def test_known_errors_are_one_line_and_exit_1(tmp_path):
 def test_log_lines_go_to_standard_error():
     # `bench ... --json` prints its JSON on standard output; a warning logged during the
     # run (the 10-robot load test logs some) must not land in it
+    # (an info line: without our handler, logging's last resort would print only
+    # warnings, and without the logger's name)
     code = (
         "import logging; from polyswarm.cli import setup_logging; "
-        "setup_logging(logging.INFO); logging.getLogger('polyswarm.x').warning('a log line')"
+        "setup_logging(logging.INFO); logging.getLogger('polyswarm.x').info('a log line')"
     )
     p = subprocess.run(
         [sys.executable, "-c", code], check=True, capture_output=True, text=True, timeout=60
     )
-    assert "a log line" in p.stderr
+    assert "polyswarm.x: a log line" in p.stderr
     assert p.stdout == ""
