@@ -2,6 +2,7 @@
 
     python examples/coordinator_replay.py record trace.pkl [ROBOTS] [SIM_SECONDS]  # 10, 60
     python examples/coordinator_replay.py replay trace.pkl [REPEATS]
+    python examples/coordinator_replay.py profile trace.pkl [TOP]  # 10
 
 ``record`` runs the 10-robot maze exploration in one process (what ``polyswarm bench
 explore --load-robots 10`` measures, about 160 s) and saves every call the coordinator
@@ -17,6 +18,13 @@ out differently is counted as refused (0 when the merge code is unchanged in eff
 The robots do not react to the replayed coordinator: its inputs are the recorded ones
 whatever it decides.
 
+``profile`` replays once under cProfile, profiling the coordinator's flushes and cycles
+only (not the robots' merges), and prints where their time goes: the share of GEOS
+calls (which release the GIL, so only they could overlap on worker threads), numpy,
+polyswarm's own Python and the rest; the TOP functions by own time; and the TOP
+slowest cycles with the robot cells that arrived before each (are the slow cycles a
+start-up burst or spread over the run?).
+
 ``POLYSWARM_CODE=/other/checkout`` imports the code from another checkout (``git
 worktree add /tmp/old COMMIT``); run both one after the other on the same trace.
 """
@@ -30,8 +38,10 @@ if os.environ.get("POLYSWARM_CODE"):
     sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in repr(f)]
     sys.path.insert(0, os.environ["POLYSWARM_CODE"])
 
+import cProfile
 import hashlib
 import pickle
+import pstats
 import time
 
 import numpy as np
@@ -107,9 +117,66 @@ def replay(path: str, repeats: int = 3) -> None:
     )
 
 
+def _library(path: str, name: str) -> str:
+    """Which library a profiled function belongs to."""
+    if "shapely" in path or "shapely" in name or "STRtree" in name:
+        return "GEOS (shapely)" if path.endswith(_GEOS_MODULES) or "STRtree" in name else "shapely"
+    if "numpy" in path or "numpy" in name or "ndarray" in name or "ufunc" in name:
+        return "numpy"
+    if "polyswarm" in path or "agents" in path:
+        return "polyswarm Python"
+    return "other (builtins, stdlib, scipy)"
+
+
+# shapely's modules whose functions are one vectorised GEOS call each
+_GEOS_MODULES = ("set_operations.py", "predicates.py", "constructive.py", "creation.py")
+
+
+def profile(path: str, top: int = 10) -> None:
+    with open(path, "rb") as f:
+        data = pickle.load(f)
+    coord = coordinator_module.Coordinator(Config(), data["robots"])
+    prof = cProfile.Profile()
+    cycles, arrived = [], 0
+    for name, args in data["trace"]:
+        on = name in ("flush", "cycle")  # a cycle flushes first
+        if on:
+            arrived += sum(len(cells) for cells in coord._pending.values())
+            prof.enable()
+        try:
+            getattr(coord, name)(*args)
+        except MapError:
+            pass
+        finally:
+            if on:
+                prof.disable()
+        if name == "cycle":
+            cycles.append((coord.cycle_ms[-1], coord.now, arrived, len(coord.merged.cells)))
+            arrived = 0
+    stats = pstats.Stats(prof)
+    share: dict[str, float] = {}
+    for (fn, _, name), (_, _, own_s, _, _) in stats.stats.items():
+        share[_library(fn, name)] = share.get(_library(fn, name), 0.0) + own_s
+    total = sum(share.values())
+    print(f"flushes and cycles under cProfile: {total:.2f} s (profiling adds to Python calls)")
+    for lib, s in sorted(share.items(), key=lambda kv: -kv[1]):
+        print(f"  {lib:32s} {s:6.2f} s  {100 * s / total:5.1f} %")
+    print(f"top {top} functions by own time:")
+    rows = sorted(stats.stats.items(), key=lambda kv: -kv[1][2])[:top]
+    for (fn, line, name), (_, calls, own_s, _, _) in rows:
+        print(f"  {own_s:6.2f} s {calls:7d} calls  {os.path.basename(fn)}:{line} {name}")
+    print(
+        f"the {top} slowest cycles (under the profiler; the first left out, as the benchmark does):"
+    )
+    for ms, t, n_in, n_cells in sorted(cycles[1:], reverse=True)[:top]:
+        print(f"  {ms:6.1f} ms at {t:5.1f} s simulated: {n_in} robot cells in, {n_cells} merged")
+
+
 if __name__ == "__main__":
     verb, *rest = sys.argv[1:]
     if verb == "record":
         record(rest[0], *(int(rest[1]),) if len(rest) > 1 else (), *map(float, rest[2:3]))
+    elif verb == "profile":
+        profile(rest[0], *(int(r) for r in rest[1:2]))
     else:
         replay(rest[0], *(int(r) for r in rest[1:2]))
