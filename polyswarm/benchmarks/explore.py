@@ -50,15 +50,19 @@ class RunSpec:
     seed: int
 
 
-def plan_runs(worlds: list[str], robots: list[int], seeds: int, nearest: bool) -> list[RunSpec]:
-    """World x robot count (hungarian) x seed, plus 3-robot ``nearest`` on NEAREST_WORLDS."""
-    runs = [RunSpec(w, n, "hungarian", s) for w in worlds for n in robots for s in range(seeds)]
+def plan_runs(
+    worlds: list[str], robots: list[int], seeds: int, nearest: bool, first_seed: int = 0
+) -> list[RunSpec]:
+    """World x robot count (hungarian) x seed (``first_seed`` .. ``first_seed + seeds -
+    1``), plus 3-robot ``nearest`` on NEAREST_WORLDS."""
+    seed_range = range(first_seed, first_seed + seeds)
+    runs = [RunSpec(w, n, "hungarian", s) for w in worlds for n in robots for s in seed_range]
     if nearest:
         runs += [
             RunSpec(w, max(robots), "nearest", s)
             for w in worlds
             if w in NEAREST_WORLDS and max(robots) > 1
-            for s in range(seeds)
+            for s in seed_range
         ]
     return runs
 
@@ -179,9 +183,10 @@ def run(
     load_robots: int,
     load_sim_s: float,
     on_run: Callable[[int, int, RunSpec, dict | None], None] | None = None,
+    first_seed: int = 0,
 ) -> dict:
     out = out or Path(tempfile.mkdtemp(prefix="polyswarm-bench-explore-"))
-    runs = plan_runs(worlds, robots, seeds, nearest)
+    runs = plan_runs(worlds, robots, seeds, nearest, first_seed)
     rows = []
     for k, spec in enumerate(runs):
         if on_run:

@@ -250,6 +250,9 @@ def bench_explore(
     ),
     robots: str = typer.Option("1,3", help="Robot counts, comma separated."),
     seeds: int = typer.Option(5, min=1, help="Seeds per world and robot count."),
+    first_seed: int = typer.Option(
+        0, min=0, help="First seed (runs seeds FIRST_SEED .. FIRST_SEED + SEEDS - 1)."
+    ),
     nearest: bool = typer.Option(
         True, help="Also run the nearest-frontier baseline (3 robots, maze and loop)."
     ),
@@ -294,6 +297,7 @@ def bench_explore(
             load_robots,
             load_time,
             on_run,
+            first_seed,
         )
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
