@@ -117,19 +117,25 @@ def replay(path: str, repeats: int = 3) -> None:
     )
 
 
+# shapely's modules whose functions are one vectorised GEOS call each
+_GEOS_MODULES = ("set_operations.py", "predicates.py", "constructive.py", "creation.py")
+
+
 def _library(path: str, name: str) -> str:
     """Which library a profiled function belongs to."""
-    if "shapely" in path or "shapely" in name or "STRtree" in name:
-        return "GEOS (shapely)" if path.endswith(_GEOS_MODULES) or "STRtree" in name else "shapely"
+    if (
+        ("shapely" in path and path.endswith(_GEOS_MODULES))
+        or "STRtree" in name
+        or "shapely.lib" in name
+    ):
+        return "GEOS (shapely)"
+    if "shapely" in path or "shapely" in name:
+        return "shapely"
     if "numpy" in path or "numpy" in name or "ndarray" in name or "ufunc" in name:
         return "numpy"
     if "polyswarm" in path or "agents" in path:
         return "polyswarm Python"
     return "other (builtins, stdlib, scipy)"
-
-
-# shapely's modules whose functions are one vectorised GEOS call each
-_GEOS_MODULES = ("set_operations.py", "predicates.py", "constructive.py", "creation.py")
 
 
 def profile(path: str, top: int = 10) -> None:
@@ -169,7 +175,10 @@ def profile(path: str, top: int = 10) -> None:
         f"the {top} slowest cycles (under the profiler; the first left out, as the benchmark does):"
     )
     for ms, t, n_in, n_cells in sorted(cycles[1:], reverse=True)[:top]:
-        print(f"  {ms:6.1f} ms at {t:5.1f} s simulated: {n_in} robot cells in, {n_cells} merged")
+        print(
+            f"  {ms:6.1f} ms at {t:5.1f} s simulated: {n_in} robot cells in, "
+            f"merged map {n_cells} cells"
+        )
 
 
 if __name__ == "__main__":
