@@ -12,7 +12,6 @@ deterministic, so the values compare seed by seed; with every part its own proce
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import time
 from multiprocessing import Pool
@@ -20,22 +19,22 @@ from multiprocessing import Pool
 SIM_LIMIT_S = 3000.0  # simulated seconds: a run that has not reached 99 % by then failed
 
 
-def with_field(cfg, path: list[str], value):
-    """``cfg`` with the field at ``path`` set to ``value`` (frozen dataclasses)."""
-    if len(path) == 1:
-        return dataclasses.replace(cfg, **{path[0]: value})
-    return dataclasses.replace(cfg, **{path[0]: with_field(getattr(cfg, path[0]), path[1:], value)})
+def nested(path: list[str], value) -> dict:
+    """``{"a": {"b": value}}`` for the path ``["a", "b"]``: a config override."""
+    return {path[0]: nested(path[1:], value)} if len(path) > 1 else {path[0]: value}
 
 
 def t99(job: tuple[str, int, int, str, float]) -> tuple[float, int, float | None]:
     world, robots, seed, field, value = job
     from polyswarm.benchmarks.inproc import explore_in_process
-    from polyswarm.config import Config
+    from polyswarm.config import Config, with_overrides
+    from polyswarm.evaluation import time_to_coverage
 
-    cfg = with_field(Config(), field.split("."), value)
+    # validated like a TOML file: an unknown field or a bad value is a ConfigError
+    cfg = with_overrides(Config(), nested(field.split("."), value))
     t0 = time.monotonic()
     run = explore_in_process(world, robots, SIM_LIMIT_S, seed=seed, cfg=cfg, stop_coverage=0.99)
-    t = next((t for t, c in run.coverage if c >= 0.99), None)
+    t = time_to_coverage(run.coverage, 0.99)
     wall_s = time.monotonic() - t0
     print(f"{field}={value} seed {seed}: t99 {t} s ({wall_s:.0f} s wall)", flush=True)
     return value, seed, t

@@ -29,11 +29,12 @@ def t99(args: tuple[str, int, int, float, float]) -> tuple[tuple, int, float | N
     world, robots, seed, weight, radius = args
     import polyswarm.explore
     from polyswarm.benchmarks.inproc import explore_in_process
+    from polyswarm.evaluation import time_to_coverage
 
     polyswarm.explore.GAIN_WEIGHT = weight  # this worker process only
     polyswarm.explore.GAIN_RADIUS_M = radius
     run = explore_in_process(world, robots, SIM_LIMIT_S, seed=seed, stop_coverage=0.99)
-    return (weight, radius), seed, next((t for t, c in run.coverage if c >= 0.99), None)
+    return (weight, radius), seed, time_to_coverage(run.coverage, 0.99)
 
 
 def main(

@@ -23,11 +23,12 @@ def t99(args: tuple[str, int, int, str]) -> tuple[str, int, float | None]:
     world, robots, seed, strategy = args
     from polyswarm.benchmarks.inproc import explore_in_process
     from polyswarm.config import Config
+    from polyswarm.evaluation import time_to_coverage
 
     cfg = Config()
     cfg = dataclasses.replace(cfg, explore=dataclasses.replace(cfg.explore, strategy=strategy))
     run = explore_in_process(world, robots, SIM_LIMIT_S, seed=seed, cfg=cfg, stop_coverage=0.99)
-    return strategy, seed, next((t for t, c in run.coverage if c >= 0.99), None)
+    return strategy, seed, time_to_coverage(run.coverage, 0.99)
 
 
 def main(

@@ -5,6 +5,7 @@ rpe(est, ref, 1.0)                 relative pose error over 1 m of travel
 max_errors(est, ref)               largest translation / rotation error (same frame)
 map_iou(explored, truth)           intersection over union of free space
 wall_distance(starts, ends, walls) mean distance of obstacle vectors to true walls
+time_to_coverage(curve, 0.99)      first time a coverage curve reaches a fraction (t99)
 """
 
 from __future__ import annotations
@@ -102,3 +103,9 @@ def wall_distance(
     dist = shapely.distance(shapely.points(pts), walls.geometries[idx])
     w = np.repeat(L / n, n)  # weight by length represented
     return float(np.sum(dist * w) / np.sum(w))
+
+
+def time_to_coverage(curve, fraction: float) -> float | None:
+    """The first time (s) of ``curve`` ((time s, covered fraction) pairs in time order)
+    at which the covered fraction is at least ``fraction``; None if it never is."""
+    return next((t for t, c in curve if c >= fraction), None)

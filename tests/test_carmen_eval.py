@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from polyswarm.errors import DataFormatError
-from polyswarm.evaluation import align_se2, ate_rmse, max_errors, rpe, travelled
+from polyswarm.evaluation import (
+    align_se2,
+    ate_rmse,
+    max_errors,
+    rpe,
+    time_to_coverage,
+    travelled,
+)
 from polyswarm.io.carmen import read_carmen
 from polyswarm.io.tum import read_tum, write_tum
 from polyswarm.odometry import IncrementNoise, noisy_odometry
@@ -115,3 +122,11 @@ def test_shared_logs_have_the_documented_scan_counts(shared_data):
         assert len(log.scans) == n
         inc = log.scans[0].scan.angle_increment
         assert math.degrees(inc) in (pytest.approx(1.0, abs=1e-3), pytest.approx(0.5, abs=1e-3))
+
+
+def test_time_to_coverage_is_the_first_time_the_fraction_is_reached():
+    curve = [(0.0, 0.0), (10.0, 0.5), (20.0, 0.9), (30.0, 0.89), (40.0, 0.995)]
+    assert time_to_coverage(curve, 0.9) == 20.0  # reached exactly; the dip at 30 s after it
+    assert time_to_coverage(curve, 0.99) == 40.0
+    assert time_to_coverage(curve, 1.0) is None  # never reached
+    assert time_to_coverage([], 0.5) is None

@@ -34,6 +34,7 @@ import shapely
 from agents.session import Bus, SessionSpec, open_session
 from polyswarm.config import Config, RobotEntry, config_to_dict, save_config, with_overrides
 from polyswarm.errors import ConfigError, DecodeError, MapError, PolyswarmError
+from polyswarm.evaluation import time_to_coverage
 from polyswarm.polymap import GridPolyMap, MapDelta
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta, decode_map
@@ -234,9 +235,6 @@ class Observer:
     def metrics(self, wall_s: float, opts: LaunchOptions) -> dict:
         cov = self.coverage
 
-        def first(frac: float):
-            return next((t for t, c in cov if c >= frac), None)
-
         return {
             "world": self.world.name,
             "robots": len(self.robots),
@@ -244,8 +242,8 @@ class Observer:
             "seed": opts.seed,
             "mission_state": str(self.mission),
             "coverage_over_time": [[round(t, 2), round(c, 5)] for t, c in cov],
-            "t90_s": first(0.90),
-            "t99_s": first(0.99),
+            "t90_s": time_to_coverage(cov, 0.90),
+            "t99_s": time_to_coverage(cov, 0.99),
             "final_coverage": cov[-1][1] if cov else 0.0,
             "sim_time_s": self.sim_t,
             "total_path_length_m": sum(v.path_length_m for v in self.robots.values()),
