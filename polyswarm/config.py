@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 import tomllib
 import types
 import typing
@@ -21,6 +22,43 @@ from pathlib import Path
 from typing import Any
 
 from polyswarm.errors import ConfigError
+from polyswarm.profiles import DEFAULT_PROFILE, PROFILES
+
+# ---------------------------------------------------------------------------------------
+# Physical ranges: every number of the configuration has one, checked when it is loaded
+# ---------------------------------------------------------------------------------------
+
+TWO_PI = 2 * math.pi
+
+
+@dataclass(frozen=True)
+class Range:
+    """Allowed values of a numeric field: lo..hi, each end open or closed."""
+
+    lo: float
+    hi: float
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def contains(self, v: float) -> bool:  # NaN is outside every range
+        above = v > self.lo if self.lo_open else v >= self.lo
+        below = v < self.hi if self.hi_open else v <= self.hi
+        return bool(above and below)
+
+    def describe(self) -> str:
+        left, right = "(" if self.lo_open else "[", ")" if self.hi_open else "]"
+        return f"{left}{self.lo:g}, {self.hi:g}{right}"
+
+
+def num(default: float, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False):
+    """A float or int field with its physical range."""
+    return field(default=default, metadata={"range": Range(lo, hi, lo_open, hi_open)})
+
+
+def positive(default: float, hi: float):
+    """A field that must be above zero (a length, a rate, a standard deviation...)."""
+    return num(default, 0.0, hi, lo_open=True)
+
 
 # ---------------------------------------------------------------------------------------
 # Sections
@@ -33,60 +71,81 @@ class MapConfig:
 
     # Side of the square cells the map is stored on; also the unit of a delta. 2 m was
     # chosen by `polyswarm bench cells` (merge cost against delta bytes, see README).
-    cell_size_m: float = 2.0
+    cell_size_m: float = num(2.0, 0.1, 100.0)
     # Whole maps that are shared or saved (the coordinator's map replies, .polymap files)
     # have their vertices rounded to this grid: a third smaller than the map's own 10 um
     # (`polyswarm bench bandwidth`), and 50 times finer than a 5 cm occupancy grid
-    whole_map_precision_m: float = 0.001
+    whole_map_precision_m: float = num(0.001, 1e-5, 0.01)
+
+
+class OutOfRange(StrEnum):
+    """How a lidar driver reports a beam that saw nothing within its range."""
+
+    INF = "inf"  # +inf (REP 117; rplidar_ros, Hokuyo's urg_node)
+    NAN = "nan"
+    ZERO = "zero"  # 0.0 (the TurtleBot3 LDS-01 driver), the same value as a dropout
 
 
 @dataclass(frozen=True)
 class LidarConfig:
-    """A 2D lidar. Defaults are the thesis simulations' sensor (chapter 5.3)."""
+    """The robot's 2D lidar: simulated as given, and read by exploration (its range and
+    field of view). Defaults are the thesis simulations' sensor (chapter 5.3); a named
+    profile (``polyswarm.profiles``) sets all of it."""
 
-    fov_rad: float = 4.71238898038469  # 270 degrees
-    beams: int = 720
-    range_max_m: float = 30.0
-    range_min_m: float = 0.05
-    rate_hz: float = 10.0
-    noise_sigma_m: float = 0.01  # zero-mean Gaussian range noise
-    dropout_prob: float = 0.0  # probability that a beam returns NaN
-    height_m: float = 0.2  # ray height above the floor in the simulator
+    fov_rad: float = num(4.71238898038469, 0.0, TWO_PI, lo_open=True)  # 270 degrees
+    beams: int = num(720, 2, 100_000)
+    range_max_m: float = positive(30.0, 1000.0)
+    range_min_m: float = num(0.05, 0.0, 100.0)
+    rate_hz: float = positive(10.0, 1000.0)
+    # zero-mean Gaussian range noise: std noise_sigma_m + noise_sigma_per_m x range
+    noise_sigma_m: float = num(0.01, 0.0, 1.0)
+    noise_sigma_per_m: float = num(0.0, 0.0, 0.2)
+    dropout_prob: float = num(0.0, 0.0, 1.0, hi_open=True)  # a beam returns nothing valid
+    out_of_range: str = "inf"  # OutOfRange: how a beam with no return is reported
+    # the beams of a scan are taken one after the other over the sweep (1 / rate_hz) while
+    # the robot moves, as a spinning lidar does; false: all at one instant
+    rolling: bool = False
+    height_m: float = num(0.2, 0.0, 0.99, lo_open=True)  # ray height, below the walls' 1 m
 
 
 @dataclass(frozen=True)
 class OdometryNoiseConfig:
-    """Wheel-odometry noise of the simulator, per integration step.
+    """Wheel-odometry noise of the simulator.
 
-    Variances grow linearly with distance and rotation, so drift does not depend on the
-    integration step: std of the travelled-distance error after d metres is
-    ``trans_sigma_per_sqrt_m * sqrt(d)``.
+    A random walk per integration step whose variances grow linearly with distance and
+    rotation (so drift does not depend on the step: the std of the travelled-distance
+    error after d metres is ``trans_sigma_per_sqrt_m * sqrt(d)``), plus systematic
+    errors drawn once per robot: every distance scaled by 1 + N(0, scale_sigma) (a wheel
+    radius off), every turn by 1 + N(0, turn_scale_sigma) (the wheel base off).
     """
 
-    trans_sigma_per_sqrt_m: float = 0.01  # m/sqrt(m): along-track distance error
-    lateral_sigma_per_sqrt_m: float = 0.005  # m/sqrt(m): sideways slip
-    rot_sigma_per_sqrt_rad: float = 0.01  # rad/sqrt(rad): heading error from turning
-    rot_sigma_per_sqrt_m: float = 0.005  # rad/sqrt(m): heading error from driving
+    trans_sigma_per_sqrt_m: float = num(0.01, 0.0, 1.0)  # m/sqrt(m): along-track distance
+    lateral_sigma_per_sqrt_m: float = num(0.005, 0.0, 1.0)  # m/sqrt(m): sideways slip
+    rot_sigma_per_sqrt_rad: float = num(0.01, 0.0, 1.0)  # rad/sqrt(rad): heading from turning
+    rot_sigma_per_sqrt_m: float = num(0.005, 0.0, 1.0)  # rad/sqrt(m): heading from driving
+    scale_sigma: float = num(0.0, 0.0, 0.5)  # fraction: distance scale error per robot
+    turn_scale_sigma: float = num(0.0, 0.0, 0.5)  # fraction: turn scale error per robot
 
 
 @dataclass(frozen=True)
 class RobotConfig:
-    radius_m: float = 0.2
-    max_linear_mps: float = 0.5
-    max_angular_radps: float = 1.5
-    max_linear_accel_mps2: float = 1.0
-    max_angular_accel_radps2: float = 3.0
+    radius_m: float = positive(0.2, 5.0)
+    max_linear_mps: float = positive(0.5, 20.0)
+    max_angular_radps: float = positive(1.5, 20.0)
+    max_linear_accel_mps2: float = positive(1.0, 100.0)
+    max_angular_accel_radps2: float = positive(3.0, 100.0)
 
 
 @dataclass(frozen=True)
 class SimConfig:
     world: str = "office"
-    seed: int = 0
-    physics_hz: float = 50.0  # fixed integration step of the robots
-    speed: float = 10.0  # simulated seconds per wall-clock second when serving
+    seed: int = num(0, 0, 2**32 - 1)
+    physics_hz: float = num(50.0, 1.0, 10_000.0)  # fixed integration step of the robots
+    # simulated seconds per wall-clock second when serving (0: as fast as possible)
+    speed: float = num(10.0, 0.0, 1e6)
     # pybullet rayTestBatch threads: 0 = every core (rays are independent, so the scans
     # stay bit-identical; 1.3-1.7x faster on 2 cores), 1 = the caller's thread only.
-    raycast_threads: int = 0
+    raycast_threads: int = num(0, 0, 256)
     robot: RobotConfig = field(default_factory=RobotConfig)
     lidar: LidarConfig = field(default_factory=LidarConfig)
     odometry_noise: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
@@ -96,29 +155,30 @@ class SimConfig:
 class RefineConfig:
     """Polygon refinement by line fitting (thesis 3.5, Algorithm 3, formulas 3.5-3.9)."""
 
-    inlier_threshold_m: float = 0.03
-    score_a: float = 1.0
-    score_b: float = 4.0
-    score_c: float = 0.001
-    flat_angle_deg: float = 15.0  # below this, chains meet at a flat angle: no intersection
-    flat_merge_distance_m: float = 0.01  # projections closer than this are averaged
+    inlier_threshold_m: float = positive(0.03, 1.0)
+    score_a: float = num(1.0, 0.0, 1000.0)
+    score_b: float = num(4.0, 0.0, 1000.0)
+    score_c: float = positive(0.001, 1000.0)  # avoids a division by zero
+    flat_angle_deg: float = num(15.0, 0.0, 90.0)  # below this, chains meet flat: no intersection
+    flat_merge_distance_m: float = num(0.01, 0.0, 1.0)  # projections closer are averaged
     # > 0: scan points farther than this from the result are pinned (visited by the
     # polygon). Off for mapping: pinning 3-sigma noise points makes spikes that bias ICP.
-    max_point_error_m: float = 0.0
+    max_point_error_m: float = num(0.0, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
 class IcpConfig:
-    max_iterations: int = 30
-    outlier_start_m: float = 0.5  # initial outlier threshold (thesis Table 5.3: 0.2 - 1.0)
-    outlier_end_m: float = 0.03  # threshold after shrinking (3 sigma of the thesis' lidar)
-    shrink: float = 0.6  # threshold multiplied by this every iteration
-    tolerance_m: float = 1e-4  # converged when the update moves points less than this
+    max_iterations: int = num(30, 1, 1000)
+    # initial outlier threshold (thesis Table 5.3: 0.2 - 1.0)
+    outlier_start_m: float = positive(0.5, 10.0)
+    outlier_end_m: float = positive(0.03, 10.0)  # after shrinking (3 sigma of the thesis' lidar)
+    shrink: float = num(0.6, 0.0, 1.0, lo_open=True)  # threshold times this every iteration
+    tolerance_m: float = positive(1e-4, 1.0)  # converged when the update moves points less
     backface_culling: bool = True
-    sample_spacing_m: float = 0.05  # map obstacle vectors sampled at this spacing for search
-    degeneracy_ratio: float = 0.02  # eigenvalue ratio below which an axis is unconstrained
-    map_radius_m: float = 32.0  # obstacle vectors farther than this from the robot are ignored
-    rotation_search_rad: float = 0.35  # heading pre-alignment by wall directions (0: off)
+    sample_spacing_m: float = positive(0.05, 1.0)  # map obstacle vectors sampled this often
+    degeneracy_ratio: float = num(0.02, 0.0, 1.0)  # eigenvalue ratio below which an axis is free
+    map_radius_m: float = positive(32.0, 1000.0)  # obstacle vectors farther away are ignored
+    rotation_search_rad: float = num(0.35, 0.0, math.pi)  # heading pre-alignment (0: off)
 
 
 class IcpReference(StrEnum):
@@ -131,9 +191,9 @@ class SubmapConfig:
     """Which keyframes a scan is matched against (polyswarm.submap)."""
 
     reference: str = "keyframes"  # IcpReference
-    keyframes: int = 20  # at most this many keyframes nearest to the predicted pose...
-    radius_m: float = 10.0  # ...within this distance of it...
-    recent: int = 5  # ...plus always the latest few (the ones tracking is sure of)
+    keyframes: int = num(20, 0, 10_000)  # at most this many keyframes nearest the prediction...
+    radius_m: float = positive(10.0, 1000.0)  # ...within this distance of it...
+    recent: int = num(5, 1, 10_000)  # ...plus always the latest few (tracking is sure of them)
 
 
 @dataclass(frozen=True)
@@ -141,29 +201,30 @@ class LoopClosureConfig:
     """Loop edges and pose-graph optimisation (polyswarm.posegraph)."""
 
     enabled: bool = True
-    min_age_keyframes: int = 30  # a loop joins keyframes at least this many keyframes apart
-    radius_m: float = 5.0  # old keyframes this close to the tracked pose are matched
-    keyframes: int = 10  # the old submap: at most this many keyframes
-    min_inlier_fraction: float = 0.5  # of the scan's valid points, for a loop to count
-    max_rmse_m: float = 0.05  # point-to-vector RMSE of an accepted loop match
-    max_correction_m: float = 2.0  # a loop match moving the pose more than this is refused
-    search_window_m: float = 2.0  # wide search (polyswarm.loopsearch) when ICP fails...
-    search_every_keyframes: int = 5  # ...at most this often, and not right after a loop
+    # a loop joins keyframes at least this many keyframes apart
+    min_age_keyframes: int = num(30, 1, 1_000_000)
+    radius_m: float = num(5.0, 0.0, 1000.0)  # old keyframes this close to the pose are matched
+    keyframes: int = num(10, 1, 10_000)  # the old submap: at most this many keyframes
+    min_inlier_fraction: float = num(0.5, 0.0, 1.0)  # of the scan's valid points
+    max_rmse_m: float = positive(0.05, 1.0)  # point-to-vector RMSE of an accepted loop match
+    max_correction_m: float = num(2.0, 0.0, 100.0)  # a loop moving the pose more is refused
+    search_window_m: float = num(2.0, 0.0, 100.0)  # wide search (polyswarm.loopsearch)...
+    search_every_keyframes: int = num(5, 1, 1_000_000)  # ...at most this often, not after a loop
     # the window grows with the distance driven since the last loop (drift grows with it;
     # 2-3 % on the logs' noise), up to max_search_window_m; 0: fixed
-    search_window_per_m: float = 0.03
-    max_search_window_m: float = 5.0
-    optimise_above_m: float = 0.02  # a loop correction (heading at 2 m per rad) optimised
-    tracking_sigma_m: float = 0.05  # std of a sequential edge from a successful ICP
-    tracking_sigma_rad: float = 0.01
+    search_window_per_m: float = num(0.03, 0.0, 1.0)
+    max_search_window_m: float = num(5.0, 0.0, 100.0)
+    optimise_above_m: float = num(0.02, 0.0, 10.0)  # a loop correction (heading at 2 m per rad)
+    tracking_sigma_m: float = positive(0.05, 10.0)  # std of a sequential edge from ICP
+    tracking_sigma_rad: float = num(0.01, 0.0, math.pi, lo_open=True)
     # ... or this many times ICP's own heading std (IcpResult.heading_sigma_rad), if more:
     # that std counts scan noise only; on orebro and aces the tracking edges' heading errors
     # were a median 6 and a 90th percentile 20 times it
-    heading_sigma_inflation: float = 20.0
-    odometry_sigma_m: float = 0.2  # std of a sequential edge where ICP failed
-    odometry_sigma_rad: float = 0.05
-    loop_sigma_m: float = 0.05
-    loop_sigma_rad: float = 0.01
+    heading_sigma_inflation: float = num(20.0, 1.0, 1000.0)
+    odometry_sigma_m: float = positive(0.2, 10.0)  # std of a sequential edge where ICP failed
+    odometry_sigma_rad: float = num(0.05, 0.0, math.pi, lo_open=True)
+    loop_sigma_m: float = positive(0.05, 10.0)
+    loop_sigma_rad: float = num(0.01, 0.0, math.pi, lo_open=True)
 
     def search_window(self, travel_m: float) -> float:
         """The wide search's window (metres) after driving ``travel_m`` since the last loop."""
@@ -175,43 +236,44 @@ class LoopClosureConfig:
 class LidarMount:
     """Where the lidar sits on the robot (robot frame), and whether it is upside down."""
 
-    x_m: float = 0.0
-    y_m: float = 0.0
-    yaw_rad: float = 0.0
+    x_m: float = num(0.0, -10.0, 10.0)
+    y_m: float = num(0.0, -10.0, 10.0)
+    yaw_rad: float = num(0.0, -TWO_PI, TWO_PI)
     upside_down: bool = False  # mirrored scans: beam angles run clockwise
 
 
 @dataclass(frozen=True)
 class SlamConfig:
-    keyframe_distance_m: float = 0.4
-    keyframe_angle_rad: float = 0.3490658503988659  # 20 degrees
-    frontier_range_m: float = 0.2  # dropouts (NaN, too short) become frontier points here
+    keyframe_distance_m: float = positive(0.4, 100.0)
+    keyframe_angle_rad: float = num(0.3490658503988659, 0.0, TWO_PI, lo_open=True)  # 20 deg
+    frontier_range_m: float = positive(0.2, 100.0)  # dropouts become frontier points here
     # a beam with no return within the lidar's range crossed free space: it ends this far
-    # out (Cartographer's missing_data_ray_length); at 0.2 m a robot turning on the spot
-    # stood in the apex of unknown wedges with no room to plan (polyswarm.scan)
-    no_return_free_m: float = 1.0
+    # out (Cartographer's missing_data_ray_length), or at NO_RETURN_SHARE of the range if
+    # that is less (polyswarm.scan). At 0.2 m a robot turning on the spot stood in the
+    # apex of unknown wedges with no room to plan
+    no_return_free_m: float = positive(1.0, 100.0)
     # merging keyframes (polyswarm.polymap.MergeOptions)
-    notch_fill_m: float = 0.01  # walls smoothed across keyframes: notches this shallow filled
-    min_growth_m: float = 0.05  # new explored space thinner than this is noise along walls
-    obstacle_snap_m: float = 0.05  # a frontier this close along a wall is that wall
+    notch_fill_m: float = num(0.01, 0.0, 1.0)  # walls smoothed across keyframes
+    min_growth_m: float = num(0.05, 0.0, 1.0)  # new explored space thinner is noise along walls
+    obstacle_snap_m: float = num(0.05, 0.0, 1.0)  # a frontier this close along a wall is it
     # a frontier lying all along beside a wall, at most this far inside it or in front of
     # it, is that wall (the chord of a grazing view of a face another view saw head-on).
     # On the maze, robots were sent to look at such faces, 2-5 cm off, and looking did not
     # close them. Inside: thinner than walls. In front: more than min_growth_m plus noise
-    obstacle_snap_behind_m: float = 0.1
-    obstacle_snap_front_m: float = 0.08
+    obstacle_snap_behind_m: float = num(0.1, 0.0, 0.5)
+    obstacle_snap_front_m: float = num(0.08, 0.0, 0.5)
     # keyframe polygons are merged with their vertices on this grid, so that a robot can
     # send the polygon itself as its map delta, in whole millimetres, and the receiver
     # replays the merge bit for bit (polymap.MergeOp); 1 mm is far below lidar noise.
     # 0: not snapped, and deltas go as changed cells
-    merge_quantum_m: float = 0.001
-    obstacle_max_gap_m: float = 0.5  # consecutive points farther apart become a frontier...
-    obstacle_gap_beams: float = 4.0  # ...unless within this many beam spacings at their range
+    merge_quantum_m: float = num(0.001, 0.0, 0.05)
+    obstacle_max_gap_m: float = positive(0.5, 100.0)  # points farther apart: a frontier...
+    obstacle_gap_beams: float = num(4.0, 0.0, 1000.0)  # ...unless this many beam spacings
     # rebuild_map (offline runs, after loop closures) merges this many consecutive
     # keyframes in one pass: they overlap, so a pass costs little more than one merge.
     # The maze route's 3,296 keyframes: 76 s one by one, 23 s by 8 (IoU 0.996 both, mean
     # wall distance 12.7 -> 13.5 mm, obstacle vectors 3,748 -> 4,334); 1: one by one
-    rebuild_batch: int = 8
+    rebuild_batch: int = num(8, 1, 10_000)
     icp: IcpConfig = field(default_factory=IcpConfig)
     submap: SubmapConfig = field(default_factory=SubmapConfig)
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
@@ -221,21 +283,21 @@ class SlamConfig:
 
 @dataclass(frozen=True)
 class NavConfig:
-    robot_radius_m: float = 0.2
+    robot_radius_m: float = positive(0.2, 5.0)
     # extra distance kept from map obstacles when planning: covers the map's wall error
     # (about 3 cm, bench slam) and leaves the local controller (which keeps the radius
     # plus ControlParams.safety_margin_m from scan points) room to follow the path
-    clearance_margin_m: float = 0.1
+    clearance_margin_m: float = num(0.1, 0.0, 5.0)
     # distance the planned path keeps from frontier vectors (the edge of explored space),
     # 0 to robot_radius_m + clearance_margin_m. Beyond a frontier nothing is known, not a
     # wall; the local controller keeps its distance from whatever the live scan shows
     # there. With the full clearance, a door seen at an angle let no robot in (see
     # polyswarm.navgraph)
-    frontier_clearance_m: float = 0.1
+    frontier_clearance_m: float = num(0.1, 0.0, 10.0)
     # where nothing wider leads on (a door 0.7 m wide for a 0.4 m robot), the path may keep
     # only this much beyond the radius from mapped obstacles: the map's wall error. Such
     # tight passages cost navgraph.TIGHT_PENALTY_M more, so wider ways are preferred
-    tight_margin_m: float = 0.03
+    tight_margin_m: float = num(0.03, 0.0, 5.0)
 
     @property
     def obstacle_clearance_m(self) -> float:
@@ -248,21 +310,30 @@ class NavConfig:
         return self.robot_radius_m + self.tight_margin_m
 
 
+class Strategy(StrEnum):
+    """How the coordinator assigns frontier targets (polyswarm.explore.assign)."""
+
+    HUNGARIAN = "hungarian"
+    GREEDY = "greedy"
+    NEAREST = "nearest"
+
+
 @dataclass(frozen=True)
 class ExploreConfig:
-    strategy: str = "hungarian"  # hungarian | greedy | nearest
-    min_frontier_length_m: float = 0.4  # shorter frontier segments are not targets
-    max_frontier_length_m: float = 4.0  # longer ones are split, so robots can share them
-    blacklist_after_failures: int = 2
+    strategy: str = "hungarian"  # Strategy
+    min_frontier_length_m: float = num(0.4, 0.0, 100.0)  # shorter segments are not targets
+    max_frontier_length_m: float = positive(4.0, 1000.0)  # longer ones are split for sharing
+    blacklist_after_failures: int = num(2, 1, 1000)
     # a robot stood at the goal and looked, yet the frontier stayed open: after this many
     # such looks it is a frontier that looking does not close (mostly wall faces seen at
     # a grazing angle); on the maze, 2 looks cost 3 robots a tenth of the mission
-    blacklist_after_looks: int = 1
-    no_progress_timeout_s: float = 20.0  # path cost to the target must shrink within this
-    hysteresis: float = 0.8  # a new target must cost less than this times the current one
-    target_separation_m: float = 3.0  # targets of different robots at least this far apart
-    cycle_period_s: float = 1.0  # assignment cycle (also on events: reached, failed, joined)
-    end_confirm_s: float = 3.0  # no reachable frontier for this long ends the mission
+    blacklist_after_looks: int = num(1, 1, 1000)
+    no_progress_timeout_s: float = positive(20.0, 1e5)  # path cost must shrink within this
+    hysteresis: float = num(0.8, 0.0, 1.0, lo_open=True)  # a new target must cost less than
+    #                                                       this times the current one
+    target_separation_m: float = num(3.0, 0.0, 1000.0)  # targets of robots this far apart
+    cycle_period_s: float = positive(1.0, 3600.0)  # assignment cycle (also on events)
+    end_confirm_s: float = num(3.0, 0.0, 3600.0)  # no reachable frontier this long: done
     return_home: bool = True  # robots drive back to their start when the mission ends
 
 
@@ -322,6 +393,9 @@ class PersistConfig:
 
 @dataclass(frozen=True)
 class Config:
+    # the robot (polyswarm.profiles): its values of sim.lidar, sim.robot,
+    # sim.odometry_noise and nav.robot_radius_m, under anything set explicitly
+    profile: str = DEFAULT_PROFILE
     map: MapConfig = field(default_factory=MapConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     slam: SlamConfig = field(default_factory=SlamConfig)
@@ -382,15 +456,18 @@ def _build(cls: type, data: Any, where: str) -> Any:
     if not isinstance(data, dict):
         raise ConfigError(f"{where or 'config'}: expected a table, got {data!r}")
     hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
+    fields = {f.name: f for f in dataclasses.fields(cls)}
     kwargs = {}
     for key, value in data.items():
         path = f"{where}.{key}" if where else key
-        if key not in names:
-            close = difflib.get_close_matches(key, names, n=1)
+        if key not in fields:
+            close = difflib.get_close_matches(key, list(fields), n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise ConfigError(f"unknown key {path!r}{hint}")
         kwargs[key] = _check_value(value, hints[key], path)
+        rng = fields[key].metadata.get("range")
+        if rng is not None and not rng.contains(kwargs[key]):
+            raise ConfigError(f"{path} must be in {rng.describe()}, got {value!r}")
     return cls(**kwargs)
 
 
@@ -418,16 +495,41 @@ def config_to_dict(cfg: Any) -> dict:
     return out
 
 
+def profile_values(name: Any) -> dict:
+    """The configuration values of a named profile (``polyswarm.profiles``)."""
+    if not isinstance(name, str):
+        raise ConfigError(f"profile: expected a string, got {name!r}")
+    if name not in PROFILES:
+        close = difflib.get_close_matches(name, list(PROFILES), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ConfigError(
+            f"profile: unknown robot profile {name!r}{hint}; known: {', '.join(PROFILES)}"
+        )
+    return PROFILES[name].overrides()
+
+
 def config_from_dict(data: dict, cls: type = Config) -> Any:
-    """Build and validate a configuration; missing keys take their defaults."""
+    """Build and validate a configuration; missing keys take their defaults, or the
+    values of the named ``profile`` where it sets them."""
+    if cls is Config and isinstance(data, dict) and "profile" in data:
+        data = _merge_dicts(profile_values(data["profile"]), data)
     cfg = _build(cls, data, "")
     validate(cfg)
     return cfg
 
 
 def with_overrides(cfg: Any, overrides: dict) -> Any:
-    """A copy of ``cfg`` with nested ``overrides`` applied and validated."""
-    return config_from_dict(_merge_dicts(config_to_dict(cfg), overrides), type(cfg))
+    """A copy of ``cfg`` with nested ``overrides`` applied and validated. A new
+    ``profile`` replaces the old profile's values; the other overrides win over it."""
+    base = config_to_dict(cfg)
+    if "profile" in overrides:
+        base = _merge_dicts(base, profile_values(overrides["profile"]))
+    return config_from_dict(_merge_dicts(base, overrides), type(cfg))
+
+
+def with_profile(cfg: Config, name: str | None) -> Config:
+    """``cfg`` with the named robot profile (None: unchanged)."""
+    return cfg if name is None else with_overrides(cfg, {"profile": name})
 
 
 def load_config(path: str | Path | None, cls: type = Config) -> Any:
@@ -453,63 +555,54 @@ def save_config(cfg: Any, path: str | Path) -> None:
     Path(path).write_text(tomli_w.dumps(config_to_dict(cfg)))
 
 
+def _choice(value: str, choices: type[StrEnum], where: str) -> None:
+    if value not in tuple(choices):
+        raise ConfigError(f"{where} must be one of {', '.join(choices)}, got {value!r}")
+
+
+def _on_grid(value: float, step: float) -> bool:
+    return abs(value / step - round(value / step)) < 1e-6
+
+
 def validate(cfg: Config) -> None:
-    """Range checks that types alone cannot express."""
+    """Checks that a field's own range cannot express: choices, grids, and fields that
+    bound each other."""
     if not isinstance(cfg, Config):
         return
-    cs = cfg.map.cell_size_m
-    if not (0.1 <= cs <= 100.0) or abs(round(cs * 1000) - cs * 1000) > 1e-6:
-        raise ConfigError(f"map.cell_size_m must be 0.1-100 m in whole millimetres, got {cs}")
+    if cfg.profile not in PROFILES:
+        profile_values(cfg.profile)  # raises with the known names
+    if not _on_grid(cfg.map.cell_size_m, 0.001):
+        raise ConfigError(f"map.cell_size_m must be whole millimetres, got {cfg.map.cell_size_m}")
+    if not _on_grid(cfg.map.whole_map_precision_m, 1e-5):
+        raise ConfigError("map.whole_map_precision_m must be whole 10 um steps")
+    q = cfg.slam.merge_quantum_m
+    if not (q == 0 or (q >= 1e-5 and _on_grid(q, 1e-5))):
+        raise ConfigError("slam.merge_quantum_m must be 0 (off) or 0.00001-0.05 m in 10 um steps")
     lid = cfg.sim.lidar
-    if lid.beams < 2 or not (0 < lid.fov_rad <= 6.283185307179586):
-        raise ConfigError("sim.lidar: need at least 2 beams and 0 < fov_rad <= 2 pi")
-    if not (0 < lid.range_min_m < lid.range_max_m):
-        raise ConfigError("sim.lidar: need 0 < range_min_m < range_max_m")
-    if not (0.0 <= lid.dropout_prob < 1.0):
-        raise ConfigError("sim.lidar.dropout_prob must be in [0, 1)")
-    if cfg.sim.robot.radius_m <= 0:
-        raise ConfigError("sim.robot.radius_m must be positive")
-    for name in ("frontier_range_m", "no_return_free_m"):
-        if not (0.0 < getattr(cfg.slam, name) <= 100.0):
-            raise ConfigError(f"slam.{name} must be 0-100 m (not 0)")
-    nav = cfg.nav
-    if nav.robot_radius_m <= 0 or not (0 <= nav.tight_margin_m <= nav.clearance_margin_m):
+    if not lid.range_min_m < lid.range_max_m:
         raise ConfigError(
-            "nav: robot_radius_m must be positive and 0 <= tight_margin_m <= clearance_margin_m"
+            f"sim.lidar.range_max_m ({lid.range_max_m:g} m) must exceed range_min_m "
+            f"({lid.range_min_m:g} m)"
         )
-    if not (0.0 <= nav.frontier_clearance_m <= nav.obstacle_clearance_m):
+    _choice(lid.out_of_range, OutOfRange, "sim.lidar.out_of_range")
+    icp = cfg.slam.icp
+    if icp.outlier_end_m > icp.outlier_start_m:
+        raise ConfigError("slam.icp.outlier_end_m must not exceed outlier_start_m")
+    nav = cfg.nav
+    if nav.tight_margin_m > nav.clearance_margin_m:
+        raise ConfigError("nav.tight_margin_m must not exceed clearance_margin_m")
+    if nav.frontier_clearance_m > nav.obstacle_clearance_m:
         raise ConfigError(
             "nav.frontier_clearance_m must be 0 to robot_radius_m + clearance_margin_m "
             f"({nav.obstacle_clearance_m:g} m), got {nav.frontier_clearance_m}"
         )
-    if cfg.sim.raycast_threads < 0:
-        raise ConfigError("sim.raycast_threads must be 0 (every core) or a thread count")
-    for name in ("blacklist_after_failures", "blacklist_after_looks"):
-        if getattr(cfg.explore, name) < 1:
-            raise ConfigError(f"explore.{name} must be at least 1")
-    for name in ("obstacle_snap_behind_m", "obstacle_snap_front_m"):
-        if not (0.0 <= getattr(cfg.slam, name) <= 0.5):
-            raise ConfigError(f"slam.{name} must be 0-0.5 m (0: off)")
-    if cfg.slam.rebuild_batch < 1:
-        raise ConfigError("slam.rebuild_batch must be at least 1 keyframe")
-    wp = cfg.map.whole_map_precision_m
-    if not (1e-5 <= wp <= 0.01 and abs(wp * 1e5 - round(wp * 1e5)) < 1e-6):
-        raise ConfigError("map.whole_map_precision_m must be 0.00001-0.01 m in whole 10 um steps")
-    q = cfg.slam.merge_quantum_m
-    if not (q == 0 or (1e-5 <= q <= 0.05 and abs(q * 1e5 - round(q * 1e5)) < 1e-6)):
-        raise ConfigError(
-            "slam.merge_quantum_m must be 0 (off) or 0.00001-0.05 m in whole 10 um steps"
-        )
-    if cfg.explore.strategy not in ("hungarian", "greedy", "nearest"):
-        raise ConfigError(
-            f"explore.strategy must be hungarian, greedy or nearest, got {cfg.explore.strategy!r}"
-        )
-    if cfg.agent.source not in tuple(SensorSource):
-        raise ConfigError(f"agent.source must be native or ros2, got {cfg.agent.source!r}")
-    if cfg.agent.output not in tuple(CommandOutput):
-        raise ConfigError(
-            f"agent.output must be native, twist, goal or none, got {cfg.agent.output!r}"
-        )
+    e = cfg.explore
+    if e.max_frontier_length_m < e.min_frontier_length_m:
+        raise ConfigError("explore.max_frontier_length_m must not be below min_frontier_length_m")
+    _choice(e.strategy, Strategy, "explore.strategy")
+    _choice(cfg.agent.source, SensorSource, "agent.source")
+    _choice(cfg.agent.output, CommandOutput, "agent.output")
+    _choice(cfg.slam.submap.reference, IcpReference, "slam.submap.reference")
     for name in ("scan_key", "odom_key", "cmd_vel_key", "goal_key"):
         key = cfg.agent.key(getattr(cfg.agent, name))
         if not key or any(ch in key for ch in "*$?#") or "//" in key:
@@ -520,11 +613,6 @@ def validate(cfg: Config) -> None:
     for r in cfg.robots:
         if not r.id or not all(ch.isalnum() or ch in "_-" for ch in r.id) or len(r.id) > 32:
             raise ConfigError(f"robots: id {r.id!r} must be 1-32 letters, digits, '_' or '-'")
-    if cfg.slam.submap.reference not in tuple(IcpReference):
-        raise ConfigError(
-            f"slam.submap.reference must be keyframes or map, got {cfg.slam.submap.reference!r}"
-        )
-    if cfg.slam.submap.keyframes < 0 or cfg.slam.submap.recent < 1:
-        raise ConfigError("slam.submap: keyframes must be >= 0 and recent >= 1")
-    if cfg.slam.refine.score_c <= 0:
-        raise ConfigError("slam.refine.score_c must be positive (it avoids a division by zero)")
+        x, y, th = r.start
+        if not (abs(x) <= 1e6 and abs(y) <= 1e6 and abs(th) <= TWO_PI):
+            raise ConfigError(f"robots: start of {r.id} must be finite metres and radians")

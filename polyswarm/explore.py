@@ -27,13 +27,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from enum import StrEnum
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from polyswarm.config import Strategy
 from polyswarm.frontiers import FrontierSegment, extract_frontiers, points_along
 from polyswarm.navgraph import TIGHT_PENALTY_M, NavGraph, clear_of, node_of, nodes_of
 from polyswarm.polymap import GridPolyMap, VectorType
@@ -76,12 +76,6 @@ GAIN_RADIUS_M = 6.0  # how far behind the frontier unexplored space is counted
 GAIN_RAYS = 9  # rays over the half disc
 GAIN_STEPS = 6  # samples per ray (1 m apart)
 GAIN_WEIGHT = 1.0  # metres of path a square metre of that area is worth (0: length only)
-
-
-class Strategy(StrEnum):
-    HUNGARIAN = "hungarian"
-    GREEDY = "greedy"
-    NEAREST = "nearest"
 
 
 @dataclass(frozen=True, eq=False)

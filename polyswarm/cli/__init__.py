@@ -85,6 +85,19 @@ def setup_logging(level: int) -> None:
     root.setLevel(level)
 
 
+PROFILE_HELP = (
+    "Robot profile: thesis, turtlebot3, turtlebot4 or hokuyo (its lidar, base and odometry "
+    "noise; values the config file sets win). Default: the config's, else thesis."
+)
+
+
+def load_cfg(config_path, profile: str | None = None):
+    """The TOML config (or the defaults) with ``--profile`` applied."""
+    from polyswarm.config import load_config, with_profile
+
+    return with_profile(load_config(config_path), profile)
+
+
 # command modules register themselves on the apps above
 from polyswarm.cli import bench_cmds, map_cmds, sim_cmds, slam_cmds, swarm_cmds  # noqa: E402,F401
 

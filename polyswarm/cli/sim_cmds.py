@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from polyswarm.cli import app
+from polyswarm.cli import PROFILE_HELP, app, load_cfg
 
 WORLD_HELP = (
     "Procedural world (loop, cross, zigzag, maze, office, curves, rooms), "
@@ -23,6 +23,7 @@ def sim_cmd(
     gui: bool = typer.Option(False, "--gui", help="Open the pybullet GUI (needs a display)."),
     out: Path | None = typer.Option(None, help="Write a PNG of the world and trajectories here."),
     config: Path | None = typer.Option(None, help="TOML config (its sim table is used)."),
+    profile: str | None = typer.Option(None, help=PROFILE_HELP),
     serve: bool = typer.Option(
         False, "--serve", help="Serve on Zenoh: publish scans and odometry, obey cmd_vel."
     ),
@@ -45,11 +46,11 @@ def sim_cmd(
     from rich.progress import Progress
     from rich.table import Table
 
-    from polyswarm.config import load_config, with_overrides
+    from polyswarm.config import with_overrides
     from sim import Simulation, load_world
     from sim.wander import Wander
 
-    cfg = with_overrides(load_config(config), {"sim": {"seed": seed}})
+    cfg = with_overrides(load_cfg(config, profile), {"sim": {"seed": seed}})
     w = load_world(world, seed=seed)
     if serve:
         _serve(cfg, w, robots, speed, endpoint, zenoh_config, gui, wait_coordinator)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from polyswarm.cli import app
+from polyswarm.cli import PROFILE_HELP, app, load_cfg
 from polyswarm.errors import PolyswarmError
 
 
@@ -24,19 +24,21 @@ def slam_cmd(
     ),
     speed: float = typer.Option(1.0, help="Worlds: driving speed along the route, m/s."),
     config: Path | None = typer.Option(None, help="TOML config."),
+    profile: str | None = typer.Option(None, help="Worlds: " + PROFILE_HELP),
 ) -> None:
     """Run PolySLAM; write map.polymap/.svg/.png, trajectory.tum, config.toml, metrics.json."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.table import Table
 
-    from polyswarm.config import load_config
     from polyswarm.odometry import IncrementNoise
     from polyswarm.runners import slam as runner
 
     if (log is None) == (world is None):
         raise PolyswarmError("give either a LOG or --world (not both)")
-    cfg = load_config(config)
+    if log is not None and profile is not None:
+        raise PolyswarmError("--profile is for --world runs: a log brings its own sensor")
+    cfg = load_cfg(config, profile)
     with Progress(
         TextColumn("{task.description}"),
         BarColumn(),

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from polyswarm.cli import app, exit_now
+from polyswarm.cli import PROFILE_HELP, app, exit_now, load_cfg
 from polyswarm.errors import ConfigError
 
 CONFIG_OPT = typer.Option(None, "--config", "-c", help="TOML config file.")
@@ -189,6 +189,7 @@ def launch_cmd(
     ),
     out: Path | None = typer.Option(None, help="Run folder (default runs/<timestamp>/)."),
     config: Path | None = CONFIG_OPT,
+    profile: str | None = typer.Option(None, help=PROFILE_HELP),
     fault: str = typer.Option(
         "",
         help="Inject faults: action:process@simulated-seconds, comma separated; actions "
@@ -208,7 +209,6 @@ def launch_cmd(
     from rich.live import Live
     from rich.table import Table
 
-    from polyswarm.config import load_config
     from polyswarm.explore import Strategy
     from polyswarm.runners.launch import Fault, LaunchOptions, launch
 
@@ -232,7 +232,7 @@ def launch_cmd(
         wall_limit,
         stop_coverage,
         out,
-        load_config(config),
+        load_cfg(config, profile),
         faults=Fault.parse_many(fault),
         link_faults=link_faults,
     )
