@@ -15,7 +15,6 @@ Per scan (``RobotAgent.on_scan``), in order:
 
 from __future__ import annotations
 
-import bisect
 import logging
 import math
 import threading
@@ -29,9 +28,10 @@ from polyswarm.config import Config
 from polyswarm.control import ControlParams, Follow, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PlanningError, PolyswarmError
 from polyswarm.navgraph import NavGraph, clear_of
+from polyswarm.odometry import OdometryBuffer
 from polyswarm.planner import Planner
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, VectorType
-from polyswarm.scan import LaserScan, beam_angles, scan_to_points
+from polyswarm.scan import LaserScan, beam_angles, deskew_motion, scan_to_points
 from polyswarm.se2 import transform_points
 from polyswarm.slam import PolySlam
 from protocols.keys import SwarmKeys, check_name
@@ -115,7 +115,9 @@ class RobotAgent:
         self.id = check_name(robot_id, "robot id")
         self.cfg = cfg
         self.start_pose = np.array(start_pose, dtype=float)
-        self.slam = PolySlam(cfg.slam, cfg.map.cell_size_m, self.start_pose)
+        self.slam = PolySlam(
+            cfg.slam, cfg.map.cell_size_m, self.start_pose, out_of_range=cfg.sim.lidar.out_of_range
+        )
         self.radius = cfg.nav.obstacle_clearance_m
         rc = cfg.sim.robot
         self.follower = PathFollower(
@@ -136,8 +138,7 @@ class RobotAgent:
         self.state = RobotState.IDLE
         self.detail = ""
         self.pose = self.start_pose.copy()
-        self._odom_t: list[float] = []
-        self._odom: list[np.ndarray] = []
+        self.odometry = OdometryBuffer(ODOM_BUFFER)
         self._last_plan_t = -math.inf
         self._best_remaining = math.inf
         self._progress_t = 0.0
@@ -162,17 +163,9 @@ class RobotAgent:
 
     def on_odom(self, stamp_s: float, odom: Odometry) -> None:
         pose = np.array([odom.x, odom.y, odom.theta])
-        if self._odom_t and stamp_s < self._odom_t[-1]:
-            log.warning(
-                "%s: odometry went back in time (%.3f < %.3f)", self.id, stamp_s, self._odom_t[-1]
-            )
-            self._odom_t.clear()
-            self._odom.clear()
-        self._odom_t.append(stamp_s)
-        self._odom.append(pose)
-        if len(self._odom_t) > ODOM_BUFFER:
-            del self._odom_t[: -ODOM_BUFFER // 2]
-            del self._odom[: -ODOM_BUFFER // 2]
+        last = self.odometry.latest_s
+        if not self.odometry.add(stamp_s, pose):
+            log.warning("%s: odometry went back in time (%.3f < %.3f)", self.id, stamp_s, last)
         if self._last_odom_xy is not None:
             self.stats.distance_m += float(np.hypot(*(pose[:2] - self._last_odom_xy)))
         self._last_odom_xy = pose[:2]
@@ -185,22 +178,11 @@ class RobotAgent:
 
     @property
     def latest_odom_s(self) -> float:
-        return self._odom_t[-1] if self._odom_t else -math.inf
+        return self.odometry.latest_s
 
     def odom_at(self, stamp_s: float) -> np.ndarray | None:
         """Odometry at ``stamp_s``: interpolated between the two around it."""
-        if not self._odom_t:
-            return None
-        k = bisect.bisect_left(self._odom_t, stamp_s)
-        if k == 0:
-            return self._odom[0]
-        if k >= len(self._odom_t):
-            return self._odom[-1]
-        t0, t1 = self._odom_t[k - 1], self._odom_t[k]
-        a, b = self._odom[k - 1], self._odom[k]
-        f = 0.0 if t1 <= t0 else (stamp_s - t0) / (t1 - t0)
-        dth = math.remainder(b[2] - a[2], 2 * math.pi)
-        return np.array([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * dth])
+        return self.odometry.at(stamp_s)
 
     def on_assignment(self, a: Assignment, now_s: float) -> None:
         same = (
@@ -236,14 +218,18 @@ class RobotAgent:
     # -- the per-scan step ------------------------------------------------------------------
 
     def on_scan(self, stamp_s: float, scan: LaserScan) -> Outbox:
+        """One scan; ``stamp_s`` is now (for a rolling sweep: when its last beam was taken,
+        the time its points are de-skewed to)."""
         out = Outbox()
         self.stats.scans += 1
-        # 1. odometry at the scan time
+        stamp_s = max(stamp_s, scan.end_stamp)
+        # 1. odometry at the scan time, and over the sweep for de-skewing
         odom = self.odom_at(stamp_s)
         if odom is None:
             return out
+        motion = deskew_motion(scan, self.odometry.at_many)
         # 2. PolySLAM: pose, and on keyframes the map delta (other robots are not walls)
-        step = self.slam.process(self._without_peers(scan, stamp_s), odom)
+        step = self.slam.process(self._without_peers(scan, stamp_s), odom, motion)
         turned = abs(math.remainder(step.pose[2] - self.pose[2], 2 * math.pi))
         self.pose = step.pose
         if step.keyframe:
@@ -510,7 +496,15 @@ def scan_from_message(msg: Scan, stamp_s: float) -> LaserScan:
         msg.range_min_m,
         msg.range_max_m,
         stamp_s,
+        msg.time_increment_s,
+        msg.scan_time_s,
     )
+
+
+def scan_end_s(item) -> float:
+    """When a scan message's last beam was taken: its points need odometry until then."""
+    msg: Scan = item.msg
+    return item.stamp_s + msg.time_increment_s * max(len(msg.ranges_m) - 1, 0)
 
 
 # --- the process --------------------------------------------------------------------------------
@@ -590,12 +584,12 @@ def run_agent(
                     try:
                         if isinstance(msg, Odometry):
                             agent.on_odom(item.stamp_s, msg)
-                            while waiting and waiting[0][1].stamp_s <= item.stamp_s:
+                            while waiting and scan_end_s(waiting[0][1]) <= item.stamp_s:
                                 _process_scan(bus, me, agent, waiting.pop(0)[1], sink, state_dir)
                         elif isinstance(msg, Scan):
                             # odometry and scans travel on separate keys: a scan waits
                             # (briefly) for the odometry of its time
-                            if agent.latest_odom_s >= item.stamp_s:
+                            if agent.latest_odom_s >= scan_end_s(item):
                                 _process_scan(bus, me, agent, item, sink, state_dir)
                             else:
                                 waiting.append((time.monotonic(), item))

@@ -1,35 +1,56 @@
-"""Stage 1 of PolySLAM: a laser scan to points in the sensor frame (thesis 3.3-3.4).
+"""Stage 1 of PolySLAM: a laser scan to points in the robot frame (thesis 3.3-3.4).
 
-Invalid beams become points flagged invalid, so they add explored space and frontier
-vectors, never obstacles:
+Drivers report a beam without a valid return in three ways (``out_of_range``): +inf
+(REP 117; rplidar_ros), NaN, or 0.0 (the TurtleBot3 LDS-01 driver, which also reports
+its dropouts so). Beams are classified before they become points:
 
-* a dropout (NaN, or shorter than the sensor's minimum range) becomes a point at a safe
-  short range (thesis 3.4): the space the robot occupies is known to be free;
-* a beam with no return within the sensor's maximum range (infinite, or at or beyond
-  it) passed through free space: it becomes a point ``no_return_free_m`` out (what
-  Cartographer calls ``missing_data_ray_length``). At the thesis' short range instead,
-  a robot turning on the spot leaves the same thin wedges of unknown space at the same
-  bearings in every keyframe, all meeting at the sensor: a robot standing in their apex
-  had no room to plan from (the 1-robot maze start).
+* a **return**: finite, within [range_min, range_max);
+* **no return**: +inf or at least range_max, or a run of at least ``NO_RETURN_RUN``
+  invalid beams reported the driver's no-return way. The beam crossed free space: it
+  becomes a point ``no_return_free_m`` out, or at ``NO_RETURN_SHARE`` of the maximum
+  range if that is less (what Cartographer calls ``missing_data_ray_length``). At the
+  thesis' short range instead, a robot turning on the spot leaves the same thin wedges of
+  unknown space at the same bearings in every keyframe, all meeting at the sensor: a
+  robot standing in their apex had no room to plan from (the 1-robot maze start);
+* a **dropout**: a shorter run of invalid beams between returns. The neighbours say a
+  surface is there, so the beams are left out and the polygon joins their neighbours
+  (an RPLIDAR's failed reading is +inf, the same as no return: read as free space it
+  cut a spike through the wall);
+* **unknown**: anything else invalid (NaN from a +inf driver, a run below range_min)
+  becomes a point at the safe short range ``frontier_range_m`` (thesis 3.4).
+
+A spinning lidar takes its beams over the sweep (``LaserScan.time_increment``); with the
+robot's motion during it (``motion``), every point is moved into the robot frame at the
+sweep's end (de-skewing), as the sensor's own driver cannot.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+NO_RETURN_RUN = 3  # beams: shorter runs of invalid beams between returns are dropouts
+# a no-return beam is trusted as free space to this share of the maximum range (the far
+# end of a sensor's range is where its misses are least certain)
+NO_RETURN_SHARE = 0.5
+
 
 @dataclass(frozen=True, eq=False)
 class LaserScan:
-    """One sweep: beam ``k`` at ``angle_min + k * angle_increment`` (radians, CCW)."""
+    """One sweep: beam ``k`` at ``angle_min + k * angle_increment`` (radians, CCW), taken
+    at ``stamp + k * time_increment`` (seconds; 0: all beams at ``stamp``), as in
+    sensor_msgs/LaserScan."""
 
-    ranges: np.ndarray  # metres; inf = no return, NaN = dropout
+    ranges: np.ndarray  # metres; how a beam without a return reads depends on the driver
     angle_min: float
     angle_increment: float
     range_min: float
     range_max: float
-    stamp: float = 0.0  # seconds
+    stamp: float = 0.0  # seconds: the first beam's time
+    time_increment: float = 0.0
+    scan_time: float = 0.0  # seconds between scans (informative)
 
     @property
     def angles(self) -> np.ndarray:
@@ -39,10 +60,19 @@ class LaserScan:
     def fov(self) -> float:
         return abs(self.angle_increment) * max(len(self.ranges) - 1, 0)
 
+    @property
+    def end_stamp(self) -> float:
+        """The last beam's time."""
+        return self.stamp + self.time_increment * max(len(self.ranges) - 1, 0)
+
+    @property
+    def beam_stamps(self) -> np.ndarray:
+        return self.stamp + self.time_increment * np.arange(len(self.ranges))
+
 
 @dataclass(frozen=True, eq=False)
 class ScanPoints:
-    xy: np.ndarray  # (n, 2) in the robot frame, beam order (counter-clockwise)
+    xy: np.ndarray  # (n, 2) in the robot frame, counter-clockwise around the sensor
     valid: np.ndarray  # (n,) bool: a real return from an obstacle
     full_circle: bool  # beams cover 360 degrees: the polygon closes without the centre
     origin: np.ndarray = field(default_factory=lambda: np.zeros(2))  # sensor, robot frame
@@ -55,26 +85,103 @@ def beam_angles(scan: LaserScan, mount: tuple[float, float, float, bool]) -> np.
     return a + mount[2]
 
 
+def classify(scan: LaserScan, out_of_range: str = "inf") -> tuple[np.ndarray, ...]:
+    """(valid, no_return, dropout) masks of the beams; the rest is unknown."""
+    r = np.asarray(scan.ranges, dtype=float)
+    valid = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max) & (r > 0)
+    far = (r >= scan.range_max) & ~np.isnan(r)  # +inf, or a reading at the range's end
+    # the driver's own way of saying "no return" (which, for 0.0, is also a dropout)
+    said = {"inf": np.isposinf(r), "nan": np.isnan(r), "zero": r == 0.0}[out_of_range] | far
+    circular = scan.fov >= 2 * np.pi - 1.5 * abs(scan.angle_increment)
+    dropout = _short_gaps(~valid, NO_RETURN_RUN, circular)
+    return valid, said & ~dropout, dropout
+
+
+def _short_gaps(invalid: np.ndarray, run: int, circular: bool) -> np.ndarray:
+    """Runs of True shorter than ``run`` with a False on both sides (around the end of a
+    full circle too)."""
+    n = len(invalid)
+    out = np.zeros(n, dtype=bool)
+    if n == 0 or invalid.all() or not invalid.any():
+        return out
+    shift = int(np.argmin(invalid)) if circular else 0  # a circle starts on a return
+    m = np.roll(invalid, -shift)
+    edges = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
+    for a, b in zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0], strict=True):
+        bounded = circular or (a > 0 and b < n)
+        if bounded and b - a < run:
+            out[a:b] = True
+    return np.roll(out, shift)
+
+
 def scan_to_points(
     scan: LaserScan,
     frontier_range_m: float = 0.2,
     mount: tuple[float, float, float, bool] = (0.0, 0.0, 0.0, False),
     no_return_free_m: float | None = None,
+    out_of_range: str = "inf",
+    motion: np.ndarray | None = None,
 ) -> ScanPoints:
     """Points of a scan in the robot frame; ``mount`` = (x, y, yaw, upside_down).
 
     ``no_return_free_m`` (metres; default ``frontier_range_m``) is where a beam with no
-    return within the maximum range ends; never beyond half the maximum range."""
+    return ends. ``motion`` (beams x 3): the robot's pose when each beam was taken, in the
+    robot frame the points are wanted in (``deskew_motion``)."""
     mx, my = mount[:2]
     r = np.asarray(scan.ranges, dtype=float)
     a = beam_angles(scan, mount)
-    order = np.argsort(a, kind="stable")  # beam order counter-clockwise
-    r, a = r[order], a[order]
-    valid = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
-    no_return = r >= scan.range_max  # +inf included; NaN compares false
+    valid, no_return, dropout = classify(scan, out_of_range)
     free_m = frontier_range_m if no_return_free_m is None else no_return_free_m
-    half = 0.5 * scan.range_max
-    rr = np.where(valid, r, np.where(no_return, min(free_m, half), min(frontier_range_m, half)))
+    share = NO_RETURN_SHARE * scan.range_max
+    rr = np.where(valid, r, np.where(no_return, min(free_m, share), min(frontier_range_m, share)))
     xy = np.stack([mx + rr * np.cos(a), my + rr * np.sin(a)], axis=1)
-    full = abs(scan.angle_increment) * len(r) >= 2 * np.pi - 1e-6
-    return ScanPoints(xy, valid, bool(full), np.array([mx, my], dtype=float))
+    keep = ~dropout
+    if motion is not None:  # each point from where its beam was taken
+        m = np.asarray(motion, dtype=float)
+        c, s = np.cos(m[:, 2]), np.sin(m[:, 2])
+        xy = np.stack(
+            [m[:, 0] + c * xy[:, 0] - s * xy[:, 1], m[:, 1] + s * xy[:, 0] + c * xy[:, 1]], axis=1
+        )
+    origin = np.array([mx, my], dtype=float)
+    # a partial field of view is ordered from the middle of what it does not see
+    gap = math.atan2(np.sin(a).mean(), np.cos(a).mean()) + math.pi
+    xy, valid, full = _around_sensor(xy[keep], valid[keep], origin, scan, gap)
+    return ScanPoints(xy, valid, full, origin)
+
+
+def _around_sensor(
+    xy: np.ndarray, valid: np.ndarray, origin: np.ndarray, scan: LaserScan, gap: float
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Points in counter-clockwise order around the sensor (a star-shaped, hence simple,
+    polygon), starting after the direction ``gap``; where a full circle taken while
+    turning overlaps itself, the older beams go."""
+    bearing = np.arctan2(xy[:, 1] - origin[1], xy[:, 0] - origin[0])
+    step = abs(scan.angle_increment)
+    full = step * len(scan.ranges) >= 2 * np.pi - 1e-6
+    if full and len(bearing) > 2:
+        turn = np.unwrap(bearing)
+        if turn[-1] < turn[0]:  # the beams ran clockwise
+            turn = -turn
+        if turn[-1] - turn[0] > 2 * np.pi - step / 2:  # the last beams cover the first ones
+            keep = turn > turn[-1] - 2 * np.pi + step / 2
+            xy, valid, bearing, turn = xy[keep], valid[keep], bearing[keep], turn[keep]
+        full = bool(turn[-1] - turn[0] >= 2 * np.pi - 1.5 * step)
+    order = np.argsort((bearing - gap) % (2 * np.pi), kind="stable")
+    return xy[order], valid[order], full
+
+
+def deskew_motion(scan: LaserScan, odom_at) -> np.ndarray | None:
+    """The robot's pose at each beam's time in its frame at the sweep's end (beams x 3),
+    from ``odom_at(times) -> (k, 3)`` odometry poses; None when the beams were taken at
+    one instant (nothing to correct)."""
+    if scan.time_increment <= 0 or len(scan.ranges) < 2:
+        return None
+    poses = np.asarray(odom_at(scan.beam_stamps), dtype=float)
+    end = poses[-1]
+    c, s = math.cos(end[2]), math.sin(end[2])
+    d = poses[:, :2] - end[:2]
+    rel = np.stack(
+        [c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], poses[:, 2] - end[2]], axis=1
+    )
+    rel[:, 2] = (rel[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    return rel

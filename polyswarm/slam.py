@@ -97,10 +97,14 @@ class PolySlam:
         cell_size_m: float = 2.0,
         initial_pose=(0.0, 0.0, 0.0),
         keep_trajectory: bool = False,
+        out_of_range: str = "inf",
     ) -> None:
         """``keep_trajectory``: remember every scan for ``trajectory()`` (offline runs; a
-        long-running agent leaves it off so its memory does not grow with every scan)."""
+        long-running agent leaves it off so its memory does not grow with every scan).
+        ``out_of_range``: how the lidar's driver reports a beam with no return
+        (``polyswarm.config.OutOfRange``)."""
         self.cfg = cfg
+        self.out_of_range = out_of_range
         self.map = GridPolyMap(cell_size_m)
         self.pose = np.array(initial_pose, dtype=float)
         self.odom: np.ndarray | None = None  # the odometry reading that goes with self.pose
@@ -154,7 +158,9 @@ class PolySlam:
         """Make the next scan a keyframe (a robot that stopped to look at something)."""
         self._keyframe_requested = True
 
-    def process(self, scan: LaserScan, odom) -> SlamStep:
+    def process(self, scan: LaserScan, odom, motion: np.ndarray | None = None) -> SlamStep:
+        """One scan with the odometry pose of the time its points are expressed at;
+        ``motion`` (``polyswarm.scan.deskew_motion``) de-skews a rolling sweep."""
         odom = np.array(odom, dtype=float)
         if not np.isfinite(odom).all():
             raise PolyswarmError(f"odometry pose is not finite: {odom}")
@@ -172,12 +178,15 @@ class PolySlam:
             return SlamStep(pred, False)
         t = {"start": time.perf_counter()}
         m = self.cfg.mount
-        # 1. scan to points (robot frame; invalid beams become short frontier points)
+        # 1. scan to points (robot frame, de-skewed; invalid beams become free space,
+        #    short frontier points, or are left out)
         points = scan_to_points(
             scan,
             self.cfg.frontier_range_m,
             (m.x_m, m.y_m, m.yaw_rad, m.upside_down),
             self.cfg.no_return_free_m,
+            self.out_of_range,
+            motion,
         )
         t["points"] = time.perf_counter()
         # 4. point-to-vector ICP against the obstacle vectors near the robot

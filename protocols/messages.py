@@ -142,7 +142,10 @@ class Message:
 class Scan(Message):
     """A 2D lidar scan (sensor frame, beams counter-clockwise from ``angle_min_rad``).
 
-    Ranges are float32 metres; +inf means no return, NaN an invalid beam."""
+    Ranges are float32 metres; a beam without a return reads as the lidar's driver
+    reports it (+inf, NaN or 0). The envelope's stamp is the first beam's time; beam k
+    was taken ``k * time_increment_s`` later (0: all at once), as in sensor_msgs/LaserScan.
+    """
 
     TYPE: ClassVar[str] = "scan"
     angle_min_rad: float
@@ -150,15 +153,20 @@ class Scan(Message):
     range_min_m: float
     range_max_m: float
     ranges_m: np.ndarray = field(repr=False)
+    time_increment_s: float = 0.0
+    scan_time_s: float = 0.0
 
     def body(self) -> dict:
-        return {
+        b = {
             "a0": self.angle_min_rad,
             "da": self.angle_increment_rad,
             "rmin": self.range_min_m,
             "rmax": self.range_max_m,
             "r": np.asarray(self.ranges_m, dtype="<f4").tobytes(),
         }
+        if self.time_increment_s or self.scan_time_s:  # absent: an instant scan
+            b |= {"dt": self.time_increment_s, "T": self.scan_time_s}
+        return b
 
     @classmethod
     def from_body(cls, b: dict) -> Scan:
@@ -178,6 +186,8 @@ class Scan(Message):
             rmin,
             rmax,
             ranges,
+            _num(b.get("dt", 0.0), "dt", 0.0, 1.0 / len(ranges)),  # a sweep within a second
+            _num(b.get("T", 0.0), "T", 0.0, 10.0),
         )
 
 

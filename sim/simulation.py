@@ -37,6 +37,7 @@ from pybullet_utils.bullet_client import BulletClient
 from polyswarm.config import SimConfig
 from polyswarm.errors import SimulationError
 from polyswarm.scan import LaserScan
+from sim.lidar import BeamSchedule, beam_angles, measure
 from sim.world import WALL_HEIGHT_M, World
 
 log = logging.getLogger(__name__)
@@ -73,8 +74,8 @@ class Robot:
 class ScanEvent:
     robot: int
     scan: LaserScan
-    odom: np.ndarray  # odometry pose at the scan time
-    true_pose: np.ndarray  # ground truth at the scan time (evaluation only)
+    odom: np.ndarray  # odometry pose when the scan is published (its sweep's end)
+    true_pose: np.ndarray  # ground truth then (evaluation only)
 
 
 @dataclass(frozen=True)
@@ -168,11 +169,23 @@ class Simulation:
                 raise SimulationError(f"start pose {tuple(pose)} of robot {r.name} is not free")
         self._lidar_rng = [np.random.default_rng([config.seed, k, 0]) for k in range(n_robots)]
         self._odom_rng = [np.random.default_rng([config.seed, k, 1]) for k in range(n_robots)]
-        lid = config.lidar
-        self.angles = np.linspace(-lid.fov_rad / 2, lid.fov_rad / 2, lid.beams)
-        if lid.fov_rad >= 2 * math.pi - 1e-9:
-            self.angles = -math.pi + np.arange(lid.beams) * (2 * math.pi / lid.beams)
+        # systematic odometry errors of each robot: its wheels' radius and base, drawn once
+        noise = config.odometry_noise
+        self._odom_scale = [
+            (
+                1.0
+                + noise.scale_sigma * float(np.random.default_rng([config.seed, k, 2]).normal()),
+                1.0
+                + noise.turn_scale_sigma
+                * float(np.random.default_rng([config.seed, k, 3]).normal()),
+            )
+            for k in range(n_robots)
+        ]
+        self.angles = beam_angles(config.lidar)
         self._cos, self._sin = np.cos(self.angles), np.sin(self.angles)
+        self._sweep = BeamSchedule.make(config.lidar, self.angles, self.scan_every, self.dt)
+        self._ranges = np.full((n_robots, len(self.angles)), np.inf)  # the sweep so far
+        self._prev = [r.pose.copy() for r in self.robots]  # poses before the current step
 
     # -- setup --------------------------------------------------------------------------
 
@@ -262,12 +275,20 @@ class Simulation:
     # -- stepping -----------------------------------------------------------------------
 
     def step(self) -> list[ScanEvent]:
-        """Advance one physics step; returns the scans taken at the new time."""
-        for r in self.robots:
+        """Advance one physics step; returns the scans whose sweep ended at the new time."""
+        for k, r in enumerate(self.robots):
+            self._prev[k] = r.pose.copy()
             self._move(r)
+        in_sweep = self.steps % self.scan_every
         self.steps += 1
+        beams = np.nonzero(self._sweep.step == in_sweep)[0]
+        if len(beams):  # the beams taken during this step, from where the robots were then
+            frac = self._sweep.frac[beams]
+            for k, ranges in enumerate(self._cast(range(len(self.robots)), beams, frac)):
+                self._ranges[k, beams] = ranges
         if self.steps % self.scan_every == 0:
-            return self._scan(range(len(self.robots)))
+            start = self.time - self._sweep.scan_time_s if self._sweep.time_increment_s else None
+            return [self._finish(k, self._ranges[k], start) for k in range(len(self.robots))]
         return []
 
     def run(self, seconds: float) -> Iterator[ScanEvent]:
@@ -321,9 +342,10 @@ class Simulation:
         rng = self._odom_rng[r.index]
         e = rng.standard_normal(3)
         d = abs(ds)
-        ds_n = ds + e[0] * n.trans_sigma_per_sqrt_m * math.sqrt(d)
+        scale, turn_scale = self._odom_scale[r.index]
+        ds_n = scale * ds + e[0] * n.trans_sigma_per_sqrt_m * math.sqrt(d)
         lat = e[1] * n.lateral_sigma_per_sqrt_m * math.sqrt(d)
-        dth_n = dth + e[2] * math.sqrt(
+        dth_n = turn_scale * dth + e[2] * math.sqrt(
             n.rot_sigma_per_sqrt_rad**2 * abs(dth) + n.rot_sigma_per_sqrt_m**2 * d
         )
         x, y, th = r.odom
@@ -333,17 +355,13 @@ class Simulation:
         new[1] += lat * math.cos(mid)
         r.odom = new
 
-    def _robot_hits(self, k: int) -> np.ndarray:
-        """Ranges from robot k's sensor to the other robots' bodies (inf: none)."""
-        me = self.robots[k]
-        x, y, th = me.pose
-        out = np.full(len(self.angles), np.inf)
+    def _robot_hits(self, x, y, dx, dy, k: int) -> np.ndarray:
+        """Ranges along rays (x, y) + t (dx, dy) of robot k's sensor to the other robots'
+        bodies (inf: none)."""
+        out = np.full(len(dx), np.inf)
         reach = self.cfg.lidar.range_max_m + self.cfg.robot.radius_m
-        c, s = math.cos(th), math.sin(th)
-        dx = c * self._cos - s * self._sin
-        dy = s * self._cos + c * self._sin
         for o in self.robots:
-            if o.index != k and math.hypot(o.pose[0] - x, o.pose[1] - y) < reach:
+            if o.index != k and np.hypot(o.pose[0] - x, o.pose[1] - y).min() < reach:
                 out = np.minimum(
                     out, _ray_circle(x, y, dx, dy, o.pose[0], o.pose[1], self.cfg.robot.radius_m)
                 )
@@ -351,50 +369,61 @@ class Simulation:
         return out
 
     def scan(self, which=None) -> list[ScanEvent]:
-        """Scan now with the given robots (all by default), without stepping."""
-        return self._scan(range(len(self.robots)) if which is None else which)
+        """Scan now with the given robots (all by default), every beam at once, without
+        stepping."""
+        which = list(range(len(self.robots)) if which is None else which)
+        every = np.arange(len(self.angles))
+        cast = self._cast(which, every, np.ones(len(every)))
+        return [self._finish(k, ranges, None) for k, ranges in zip(which, cast, strict=True)]
 
-    def _scan(self, which) -> list[ScanEvent]:
+    def _cast(self, which, beams: np.ndarray, frac: np.ndarray) -> list[np.ndarray]:
+        """True ranges (inf: nothing within range) of the given beams of each robot in
+        ``which``, each beam from the robot's pose at ``frac`` of the last step."""
         lid = self.cfg.lidar
-        which = list(which)
         r0 = self.cfg.robot.radius_m + RAY_START_OFFSET_M
-        frm, to = [], []
+        frm, to, rays = [], [], []
         for k in which:
-            x, y, th = self.robots[k].pose
-            c, s = math.cos(th), math.sin(th)
-            dx = c * self._cos - s * self._sin
-            dy = s * self._cos + c * self._sin
+            a, b = self._prev[k], self.robots[k].pose
+            x = a[0] + frac * (b[0] - a[0])
+            y = a[1] + frac * (b[1] - a[1])
+            th = a[2] + frac * math.remainder(b[2] - a[2], 2 * math.pi)
+            c, s = np.cos(th), np.sin(th)
+            dx = c * self._cos[beams] - s * self._sin[beams]
+            dy = s * self._cos[beams] + c * self._sin[beams]
             z = np.full(len(dx), lid.height_m)
             frm.append(np.column_stack([x + r0 * dx, y + r0 * dy, z]))
             to.append(np.column_stack([x + lid.range_max_m * dx, y + lid.range_max_m * dy, z]))
+            rays.append((x, y, dx, dy))
         res = self._client.rayTestBatch(
             np.vstack(frm), np.vstack(to), numThreads=self.cfg.raycast_threads
         )
-        frac = np.fromiter((h[2] for h in res), dtype=float, count=len(res))
+        frac_hit = np.fromiter((h[2] for h in res), dtype=float, count=len(res))
         hit = np.fromiter((h[0] >= 0 for h in res), dtype=bool, count=len(res))
-        out = []
-        n = len(self.angles)
+        out, n = [], len(beams)
         for i, k in enumerate(which):
-            f, h = frac[i * n : (i + 1) * n], hit[i * n : (i + 1) * n]
-            rng = self._lidar_rng[k]
-            ranges = np.where(h, r0 + f * (lid.range_max_m - r0), np.inf)
-            ranges = np.minimum(ranges, self._robot_hits(k))
-            h = np.isfinite(ranges)
-            ranges = ranges + rng.normal(0.0, lid.noise_sigma_m, n)
-            ranges = np.where(h, np.maximum(ranges, 0.0), np.inf)
-            if lid.dropout_prob > 0:
-                ranges[rng.random(n) < lid.dropout_prob] = np.nan
-            scan = LaserScan(
-                ranges,
-                float(self.angles[0]),
-                float(self.angles[1] - self.angles[0]),
-                lid.range_min_m,
-                lid.range_max_m,
-                self.time,
-            )
-            rob = self.robots[k]
-            out.append(ScanEvent(k, scan, rob.odom.copy(), rob.pose.copy()))
+            f, h = frac_hit[i * n : (i + 1) * n], hit[i * n : (i + 1) * n]
+            walls = np.where(h, r0 + f * (lid.range_max_m - r0), np.inf)
+            out.append(np.minimum(walls, self._robot_hits(*rays[i], k)))
         return out
+
+    def _finish(self, k: int, true_ranges: np.ndarray, start: float | None) -> ScanEvent:
+        """The scan robot k's driver publishes; ``start``: its first beam's time (a
+        rolling sweep), None: every beam now."""
+        lid = self.cfg.lidar
+        ranges = measure(true_ranges, lid, self._lidar_rng[k])
+        rolling = start is not None
+        scan = LaserScan(
+            ranges,
+            float(self.angles[0]),
+            float(self.angles[1] - self.angles[0]),
+            lid.range_min_m,
+            lid.range_max_m,
+            start if rolling else self.time,
+            self._sweep.time_increment_s if rolling else 0.0,
+            self._sweep.scan_time_s,
+        )
+        rob = self.robots[k]
+        return ScanEvent(k, scan, rob.odom.copy(), rob.pose.copy())
 
 
 @contextlib.contextmanager

@@ -50,7 +50,7 @@ def test_a_beam_with_no_return_crossed_free_space_a_dropout_did_not():
     assert pts.valid.tolist() == [True, False, False, False, False, True]
     assert np.allclose(np.hypot(*pts.xy.T), [1.0, 1.5, 0.2, 0.2, 1.5, 2.0])
     # never beyond half the sensor's range
-    short = LaserScan(np.array([np.inf]), 0.0, 0.1, 0.05, 2.0)
+    short = LaserScan(np.array([np.inf] * 3), 0.0, 0.1, 0.05, 2.0)
     assert np.hypot(*scan_to_points(short, 0.2, no_return_free_m=5.0).xy[0]) == pytest.approx(1.0)
 
 
@@ -65,10 +65,90 @@ def test_keyframe_of_a_square_room_is_the_room():
 
 
 def test_keyframe_with_a_gap_closes_through_the_sensor():
-    scan = LaserScan(np.array([2.0, 2.0, np.inf, 2.0, 2.0]), -0.4, 0.2, 0.05, 30.0)
+    inf = np.inf
+    scan = LaserScan(np.array([2.0, 2.0, inf, inf, inf, 2.0, 2.0]), -0.6, 0.2, 0.05, 30.0)
     kf = keyframe_polygon(scan_to_points(scan), (1.0, 0.0, 0.0))
     t = kf.shell.types
-    assert len(kf.shell) == 6
-    assert t.tolist() == [0, 1, 1, 0, 1, 1]  # gap beams and the two centre vectors: frontier
+    assert len(kf.shell) == 8
+    # gap beams and the two centre vectors: frontier
+    assert t.tolist() == [0, 1, 1, 1, 1, 0, 1, 1]
     assert np.allclose(kf.shell.xy[-1], (1.0, 0.0))
     kf.validate()
+
+
+@pytest.mark.parametrize("missing", [np.inf, np.nan, 0.0])
+def test_an_isolated_dropout_between_returns_is_left_out(missing):
+    """An RPLIDAR's failed reading is +inf like a beam with no return: read as free space
+    it would cut through the wall its neighbours see."""
+    r = np.full(12, 2.0)
+    r[5] = missing
+    scan = LaserScan(r, -0.6, 0.1, 0.12, 3.5)
+    convention = {0.0: "zero"}.get(missing, "nan" if np.isnan(missing) else "inf")
+    pts = scan_to_points(scan, 0.2, no_return_free_m=1.5, out_of_range=convention)
+    assert len(pts.xy) == 11 and pts.valid.all()
+    assert np.allclose(np.hypot(*pts.xy.T), 2.0)
+
+
+def test_a_run_of_zeros_from_an_lds01_is_no_return_and_free_space():
+    r = np.full(360, 2.0)
+    r[100:140] = 0.0  # an open door: the LDS-01 driver reports 0.0
+    scan = LaserScan(r, 0.0, 2 * np.pi / 360, 0.12, 3.5)
+    pts = scan_to_points(scan, 0.2, no_return_free_m=1.5, out_of_range="zero")
+    d = np.hypot(*pts.xy.T)
+    assert np.count_nonzero(~pts.valid) == 40
+    assert np.allclose(d[~pts.valid], 1.5)  # free space out to 1.5 m (below half of 3.5)
+    # with the +inf convention a zero is not "no return": unknown, a short frontier point
+    other = scan_to_points(scan, 0.2, no_return_free_m=1.5, out_of_range="inf")
+    assert np.allclose(np.hypot(*other.xy.T)[~other.valid], 0.2)
+
+
+def test_a_lidar_mounted_backwards_keeps_its_fan_in_one_piece():
+    """270 degrees with a yaw of pi: the unseen wedge is ahead, and the polygon closes
+    through the sensor there, not across it."""
+    angles = np.linspace(-0.75 * np.pi, 0.75 * np.pi, 271)
+    scan = LaserScan(np.full(271, 1.5), angles[0], angles[1] - angles[0], 0.05, 30.0)
+    pts = scan_to_points(scan, mount=(0.0, 0.0, np.pi, False))
+    kf = keyframe_polygon(pts, (2.0, 2.0, 0.0), max_gap_m=0.5)
+    kf.validate()
+    t = kf.shell.types
+    assert np.count_nonzero(t == VectorType.FRONTIER) == 2  # the two vectors to the centre
+    area = 0.5 * 1.5**2 * 1.5 * np.pi  # a 270 degree sector of radius 1.5 m
+    assert GridPolyMap(2.0).merge(kf).map.explored_area() == pytest.approx(area, rel=0.01)
+
+
+def test_deskewing_puts_a_turning_robots_sweep_back_in_one_frame():
+    """A 360 beam, 5 Hz sweep in a 4 m room while turning at 1 rad/s: the raw beams smear
+    0.2 rad; moved with the robot's motion per beam they fall on the walls again."""
+    from polyswarm.scan import deskew_motion
+
+    n, w, sweep = 360, 1.0, 0.2
+    dt = sweep / n
+    angles = -np.pi + np.arange(n) * 2 * np.pi / n
+    end_heading = 0.7
+    heading = end_heading - w * (sweep - dt - np.arange(n) * dt)  # at each beam
+    ranges = np.array(
+        [
+            cast_rays((2.0, 2.0), [a + h], STARTS, ENDS)[0]
+            for a, h in zip(angles, heading, strict=True)
+        ]
+    )
+    scan = LaserScan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0, 10.0, dt, sweep)
+
+    def odom_at(t):
+        return np.stack(
+            [np.full(len(t), 2.0), np.full(len(t), 2.0), end_heading - w * (scan.end_stamp - t)],
+            axis=1,
+        )
+
+    motion = deskew_motion(scan, odom_at)
+    skewed = keyframe_polygon(scan_to_points(scan), (2.0, 2.0, end_heading), 0.5)
+    fixed = keyframe_polygon(scan_to_points(scan, motion=motion), (2.0, 2.0, end_heading), 0.5)
+    fixed.validate()
+
+    def wall_error(poly):
+        xy = poly.shell.xy
+        return np.min(np.abs(np.stack([xy[:, 0], 4 - xy[:, 0], xy[:, 1], 4 - xy[:, 1]])), axis=0)
+
+    assert wall_error(fixed).max() < 1e-6
+    assert wall_error(skewed).max() > 0.2
+    assert deskew_motion(LaserScan(ranges, angles[0], 0.01, 0.05, 30.0), odom_at) is None

@@ -40,12 +40,78 @@ def test_square_room_gives_the_analytic_ranges():
     assert np.abs(err).max() < 6 * 0.01
 
 
-def test_beams_that_hit_nothing_are_inf_and_dropout_is_nan():
+@pytest.mark.parametrize(
+    ("convention", "is_reported"),
+    [("inf", np.isposinf), ("nan", np.isnan), ("zero", lambda r: r == 0.0)],
+)
+def test_beams_without_a_return_are_reported_the_drivers_way(convention, is_reported):
     world = load_world("loop")
-    with Simulation(world, cfg(lidar={"range_max_m": 3.0, "dropout_prob": 0.2}), 1) as sim:
+    lidar = {"range_max_m": 3.0, "dropout_prob": 0.2, "out_of_range": convention}
+    with Simulation(world, cfg(lidar=lidar), 1) as sim:
         r = next(iter(sim.run(0.2))).scan.ranges
-    assert np.isinf(r).any()  # the corridor is longer than 3 m
-    assert 0.1 < np.isnan(r).mean() < 0.3
+    missing = is_reported(r)
+    # the corridor is longer than 3 m: some beams see nothing, and a fifth drop out
+    assert 0.25 < missing.mean() < 0.85
+    assert np.all(np.isfinite(r[~missing]) & (r[~missing] > 0.05) & (r[~missing] < 3.0))
+
+
+def test_range_noise_grows_with_the_range_as_the_datasheet_says():
+    lidar = {"noise_sigma_m": 0.0, "noise_sigma_per_m": 0.02, "fov_rad": 2 * math.pi}
+    with Simulation(square_room(), cfg(lidar=lidar), 1, start_poses=[(2.0, 2.0, 0.0)]) as sim:
+        errs = []
+        for ev in sim.run(10.0):
+            a = ev.scan.angles
+            half = 2.0 - INNER
+            expect = np.minimum(half / np.abs(np.cos(a)), half / np.abs(np.sin(a)))
+            errs.append((ev.scan.ranges - expect) / expect)
+    rel = np.concatenate(errs)
+    assert 0.018 < rel.std() < 0.022  # 2 % of the range, near walls and in corners alike
+
+
+def test_a_rolling_sweep_takes_its_beams_over_the_sweep_while_the_robot_turns():
+    """A 5 Hz lidar turning at 1 rad/s smears 0.2 rad over a sweep: the first beam sees
+    the room as it was 0.2 s before the last one."""
+    lidar = {"fov_rad": 2 * math.pi, "beams": 360, "rate_hz": 5.0, "noise_sigma_m": 0.0}
+    rolling = cfg(lidar=lidar | {"rolling": True}, robot={"max_angular_accel_radps2": 100.0})
+    with Simulation(square_room(), rolling, 1, start_poses=[(2.0, 2.0, 0.0)]) as sim:
+        sim.set_cmd(0, 0.0, 1.0)
+        events = list(sim.run(1.0))
+    ev = events[-1]
+    s = ev.scan
+    assert s.time_increment == pytest.approx(0.2 / 360)
+    assert s.end_stamp == pytest.approx(s.stamp + 0.2 * 359 / 360)
+    assert sim.time == pytest.approx(s.stamp + 0.2)  # published at the sweep's end
+    # beam k was taken at heading theta_end - (0.2 - k dt) rad/s x 1 rad/s
+    heading = ev.true_pose[2] - (0.2 - np.arange(360) * s.time_increment) * 1.0
+    a = s.angles + heading
+    half = 2.0 - INNER
+    expect = np.minimum(half / np.abs(np.cos(a)), half / np.abs(np.sin(a)))
+    assert np.abs(s.ranges - expect).max() < 0.02
+    unskewed = np.minimum(
+        half / np.abs(np.cos(s.angles + ev.true_pose[2])),
+        half / np.abs(np.sin(s.angles + ev.true_pose[2])),
+    )
+    assert np.abs(s.ranges - unskewed).max() > 0.1  # the smear is real
+
+
+def test_each_robot_has_its_own_systematic_odometry_error():
+    noise = {
+        "trans_sigma_per_sqrt_m": 0.0,
+        "lateral_sigma_per_sqrt_m": 0.0,
+        "rot_sigma_per_sqrt_rad": 0.0,
+        "rot_sigma_per_sqrt_m": 0.0,
+        "scale_sigma": 0.05,
+    }
+    poses = [(1.0, 1.0, 0.0), (1.0, 3.0, 0.0)]
+    with Simulation(square_room(), cfg(odometry_noise=noise), 2, start_poses=poses) as sim:
+        for k in (0, 1):
+            sim.set_cmd(k, 0.2, 0.0)
+        list(sim.run(5.0))
+        ratios = [
+            (r.odom[0] - 0.0) / (r.pose[0] - p[0]) for r, p in zip(sim.robots, poses, strict=True)
+        ]
+    assert ratios[0] != pytest.approx(ratios[1], abs=1e-3)
+    assert all(0.8 < q < 1.2 and q != pytest.approx(1.0, abs=1e-4) for q in ratios)
 
 
 def test_two_robots_see_each_other():

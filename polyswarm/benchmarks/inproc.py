@@ -72,7 +72,7 @@ def explore_in_process(
             for ev in events:
                 a = agents[ev.robot]
                 a.on_odom(sim.time, Odometry(*ev.odom))
-                out = a.on_scan(sim.time, ev.scan)
+                out = a.on_scan(sim.time, ev.scan)  # now: the end of its sweep
                 if out.cmd:
                     sim.set_cmd(ev.robot, *out.cmd)
                 if out.delta is not None:  # what the agent sends: the merge or the cells
