@@ -223,8 +223,8 @@ class RobotAgent:
         out = Outbox()
         self.stats.scans += 1
         stamp_s = max(stamp_s, scan.end_stamp)
-        # 1. odometry at the scan time, and over the sweep for de-skewing
-        odom = self.odom_at(stamp_s)
+        # 1. odometry at the scan time (its last beam's), and over the sweep for de-skewing
+        odom = self.odom_at(scan.end_stamp)
         if odom is None:
             return out
         motion = deskew_motion(scan, self.odometry.at_many)

@@ -38,7 +38,7 @@ from polyswarm.config import SimConfig
 from polyswarm.errors import SimulationError
 from polyswarm.scan import LaserScan
 from sim.lidar import BeamSchedule, beam_angles, measure
-from sim.world import WALL_HEIGHT_M, World
+from sim.shapes import WALL_HEIGHT_M, World
 
 log = logging.getLogger(__name__)
 

@@ -7,7 +7,8 @@ Two sources:
   runs stacked). Unknown pixels that touch the reachable free space are walled too,
   so lidar beams cannot leak out through gaps in the mapped walls.
 * procedural worlds defined in code (``procedural_world``): loop, cross, zigzag, maze
-  (seeded), office, curves and rooms, so the simulator works with nothing installed.
+  (seeded), office, curves, rooms and furnished (seeded clutter, `sim.furnished`), so
+  the simulator works with nothing installed.
 
 Every world knows its ground truth: the free space reachable from the start area and
 the wall outlines as segments (for coverage and map-accuracy metrics).
@@ -17,52 +18,25 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import shapely
 from scipy import ndimage
-from shapely.geometry import LineString, Point, box
+from shapely.geometry import Point
 from shapely.ops import nearest_points
 
 from polyswarm.errors import SimulationError
 from polyswarm.occupancy import OccupancyGrid
+from sim.furnished import furnished_world
+from sim.shapes import (
+    World,
+    square,
+    walls_from_lines,
+    world_from_walls,
+)
 
-WALL_THICKNESS_M = 0.2  # procedural walls: as thick as one pixel of the thesis maps
-WALL_HEIGHT_M = 1.0  # above every lidar mount
-
-PROCEDURAL = ("loop", "cross", "zigzag", "maze", "office", "curves", "rooms")
-
-
-@dataclass(frozen=True, eq=False)
-class World:
-    name: str
-    walls: shapely.Geometry  # solid material, (Multi)Polygon
-    free: shapely.Geometry  # ground truth: free space reachable from the start area
-    start: tuple[float, float]  # centre of the start area
-    start_heading: float = 0.0
-    boxes: np.ndarray | None = None  # (k, 4) x0 y0 x1 y1 of wall boxes (grid worlds)
-    grid: OccupancyGrid | None = None
-
-    @property
-    def bounds(self) -> tuple[float, float, float, float]:
-        return tuple(shapely.bounds(shapely.union(self.walls, self.free)))  # type: ignore[return-value]
-
-    @property
-    def wall_segments(self) -> tuple[np.ndarray, np.ndarray]:
-        """Outline of the walls as segments (starts, ends)."""
-        rings = shapely.get_rings(shapely.get_parts(self.walls))
-        starts, ends = [], []
-        for r in rings:
-            c = shapely.get_coordinates(r)
-            starts.append(c[:-1])
-            ends.append(c[1:])
-        return np.concatenate(starts), np.concatenate(ends)
-
-    @property
-    def free_area(self) -> float:
-        return float(self.free.area)
+PROCEDURAL = ("loop", "cross", "zigzag", "maze", "office", "curves", "rooms", "furnished")
 
 
 # ---------------------------------------------------------------------------------------
@@ -159,63 +133,38 @@ def world_from_map_yaml(path: str | Path, start: tuple[float, float] | None = No
 # ---------------------------------------------------------------------------------------
 
 
-def _walls_from_lines(lines: list, thickness: float = WALL_THICKNESS_M) -> shapely.Geometry:
-    geoms = [
-        LineString(ln).buffer(thickness / 2, cap_style="square", join_style="mitre") for ln in lines
-    ]
-    return shapely.union_all(geoms, grid_size=1e-6)
-
-
-def _world_from_walls(
-    name: str, walls: shapely.Geometry, start: tuple[float, float], heading: float = 0.0
-) -> World:
-    x0, y0, x1, y1 = walls.bounds
-    space = box(x0 - 1, y0 - 1, x1 + 1, y1 + 1).difference(walls)
-    parts = [p for p in shapely.get_parts(space) if p.contains(Point(start))]
-    if not parts:
-        raise SimulationError(f"start {start} of world {name!r} is inside a wall")
-    free = parts[0]
-    if free.bounds[0] < x0:
-        raise SimulationError(f"world {name!r} is not closed around its start")
-    return World(name, walls, free, start, heading)
-
-
-def _square(x0, y0, x1, y1):
-    return [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)]
-
-
 def loop_world(size: float = 40.0, corridor: float = 5.0) -> World:
     """A square corridor around a closed block: loop closure after a long drive."""
-    walls = _walls_from_lines(
-        [_square(0, 0, size, size), _square(corridor, corridor, size - corridor, size - corridor)]
+    walls = walls_from_lines(
+        [square(0, 0, size, size), square(corridor, corridor, size - corridor, size - corridor)]
     )
-    return _world_from_walls("loop", walls, (2.0, 2.0))
+    return world_from_walls("loop", walls, (2.0, 2.0))
 
 
 def cross_world(size: float = 40.0, corridor: float = 5.0) -> World:
     """An outer loop plus a cross of corridors through the middle: four blocks."""
     c, h = size / 2, corridor / 2
     blocks = [
-        _square(corridor, corridor, c - h, c - h),
-        _square(c + h, corridor, size - corridor, c - h),
-        _square(corridor, c + h, c - h, size - corridor),
-        _square(c + h, c + h, size - corridor, size - corridor),
+        square(corridor, corridor, c - h, c - h),
+        square(c + h, corridor, size - corridor, c - h),
+        square(corridor, c + h, c - h, size - corridor),
+        square(c + h, c + h, size - corridor, size - corridor),
     ]
-    walls = _walls_from_lines([_square(0, 0, size, size), *blocks])
-    return _world_from_walls("cross", walls, (2.0, 2.0))
+    walls = walls_from_lines([square(0, 0, size, size), *blocks])
+    return world_from_walls("cross", walls, (2.0, 2.0))
 
 
 def zigzag_world(width: float = 40.0, lanes: int = 4, corridor: float = 4.0) -> World:
     """Parallel corridors joined alternately at the ends: one long path."""
     height = lanes * corridor
-    lines = [_square(0, 0, width, height)]
+    lines = [square(0, 0, width, height)]
     for k in range(1, lanes):
         y = k * corridor
         if k % 2 == 1:
             lines.append([(0, y), (width - corridor, y)])
         else:
             lines.append([(corridor, y), (width, y)])
-    return _world_from_walls("zigzag", _walls_from_lines(lines), (2.0, 2.0))
+    return world_from_walls("zigzag", walls_from_lines(lines), (2.0, 2.0))
 
 
 def maze_world(cells: int = 6, cell: float = 4.0, seed: int = 0) -> World:
@@ -249,14 +198,14 @@ def maze_world(cells: int = 6, cell: float = 4.0, seed: int = 0) -> World:
         seen[ni, nj] = True
         stack.append((ni, nj))
     size = cells * cell
-    lines = [_square(0, 0, size, size)]
+    lines = [square(0, 0, size, size)]
     for i in range(cells):
         for j in range(cells):
             if h[i, j] and j < cells - 1:
                 lines.append([(i * cell, (j + 1) * cell), ((i + 1) * cell, (j + 1) * cell)])
             if v[i, j] and i < cells - 1:
                 lines.append([((i + 1) * cell, j * cell), ((i + 1) * cell, (j + 1) * cell)])
-    return _world_from_walls("maze", _walls_from_lines(lines), (cell / 2, cell / 2))
+    return world_from_walls("maze", walls_from_lines(lines), (cell / 2, cell / 2))
 
 
 def office_world() -> World:
@@ -264,7 +213,7 @@ def office_world() -> World:
     W, H = 20.0, 15.0
     cy0, cy1 = 6.0, 8.5  # corridor between y = 6 and y = 8.5
     door = 0.9
-    lines = [_square(0, 0, W, H)]
+    lines = [square(0, 0, W, H)]
     xs = [0.0, 5.0, 10.0, 15.0, W]
     # corridor walls with a door to every room
     for y in (cy0, cy1):
@@ -281,9 +230,9 @@ def office_world() -> World:
         lines.append([(x, cy1), (x, H)])
     # a meeting table in the last room and a pillar in the corridor
     lines.append([(16.5, 11.0), (18.5, 11.0)])
-    walls = _walls_from_lines(lines)
+    walls = walls_from_lines(lines)
     walls = shapely.union(walls, Point(12.5, 7.25).buffer(0.25, quad_segs=8))
-    return _world_from_walls("office", walls, (1.5, 7.25))
+    return world_from_walls("office", walls, (1.5, 7.25))
 
 
 def curves_world() -> World:
@@ -296,21 +245,21 @@ def curves_world() -> World:
         (1.5 + 0.4 * math.sin(t), 4.0 + 1.5 * t / math.pi)
         for t in np.linspace(-math.pi, math.pi, 40)
     ]
-    walls = _walls_from_lines([outer, s_curve], 0.15)
+    walls = walls_from_lines([outer, s_curve], 0.15)
     walls = shapely.union(walls, Point(5.0, 3.0).buffer(0.6, quad_segs=16))
-    return _world_from_walls("curves", walls, (3.5, 1.2), math.pi / 2)
+    return world_from_walls("curves", walls, (3.5, 1.2), math.pi / 2)
 
 
 def rooms_world() -> World:
     """A small 10 m x 6 m flat with three rooms: the quick end-to-end test world."""
     lines = [
-        _square(0, 0, 10, 6),
+        square(0, 0, 10, 6),
         [(4.0, 0.0), (4.0, 2.0)],
         [(4.0, 3.0), (4.0, 6.0)],
         [(4.0, 3.0), (7.0, 3.0)],
         [(8.0, 3.0), (10.0, 3.0)],
     ]
-    return _world_from_walls("rooms", _walls_from_lines(lines), (1.5, 1.5))
+    return world_from_walls("rooms", walls_from_lines(lines), (1.5, 1.5))
 
 
 def procedural_world(name: str, seed: int = 0) -> World:
@@ -322,6 +271,7 @@ def procedural_world(name: str, seed: int = 0) -> World:
         "office": office_world,
         "curves": curves_world,
         "rooms": rooms_world,
+        "furnished": lambda: furnished_world(seed),
     }
     if name not in makers:
         raise SimulationError(

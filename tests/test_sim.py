@@ -13,13 +13,13 @@ from polyswarm.data import WORLDS
 from polyswarm.errors import SimulationError
 from polyswarm.io.mapserver import read_map
 from sim import PROCEDURAL, Simulation, load_world, spread_start_poses
-from sim.world import _square, _walls_from_lines, _world_from_walls
+from sim.shapes import square, walls_from_lines, world_from_walls
 
 INNER = 0.1  # walls are 0.2 m thick around the 4 m square: inner faces 0.1 m inside
 
 
 def square_room():
-    return _world_from_walls("square", _walls_from_lines([_square(0, 0, 4, 4)], 0.2), (2.0, 2.0))
+    return world_from_walls("square", walls_from_lines([square(0, 0, 4, 4)], 0.2), (2.0, 2.0))
 
 
 def cfg(**over) -> SimConfig:
@@ -234,9 +234,9 @@ def test_coverage_route_never_crosses_a_wall_thinner_than_its_grid():
     through the door (it once went through such walls, and the robot stuck there)."""
     from sim.route import COARSE_GRID_M, coverage_route
 
-    lines = [_square(0, 0, 50, 40), [(25.0, 0.0), (25.0, 18.0)], [(25.0, 20.0), (25.0, 40.0)]]
-    walls = _walls_from_lines(lines, 0.1)
-    world = _world_from_walls("split", walls, (5.0, 5.0))
+    lines = [square(0, 0, 50, 40), [(25.0, 0.0), (25.0, 18.0)], [(25.0, 20.0), (25.0, 40.0)]]
+    walls = walls_from_lines(lines, 0.1)
+    world = world_from_walls("split", walls, (5.0, 5.0))
     assert world.free.area > 1500 and COARSE_GRID_M > 0.1  # the coarse grid is used
     route = coverage_route(world)
     assert route[:, 0].max() > 40  # it does cover the far room...
@@ -244,3 +244,12 @@ def test_coverage_route_never_crosses_a_wall_thinner_than_its_grid():
     assert not line.intersects(walls)  # ...through the door, not the wall
     through = line.intersection(shapely.box(24.9, 0, 25.1, 40))
     assert through.bounds[1] > 18.0 and through.bounds[3] < 20.0
+
+
+def test_the_furnished_world_is_seeded_and_cluttered():
+    a, b, c = (load_world("furnished", seed=s) for s in (0, 0, 1))
+    assert a.walls.equals(b.walls) and not a.walls.equals(c.walls)
+    parts = shapely.get_parts(a.walls)
+    legs = [p for p in parts if p.area < 0.01]  # desk and chair legs, columns
+    assert len(legs) >= 40
+    assert 300 < a.free_area < 380  # 24 m x 16 m less walls and furniture

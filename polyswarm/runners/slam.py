@@ -20,8 +20,9 @@ from polyswarm import evaluation as ev
 from polyswarm.config import Config, config_to_dict, save_config, with_overrides
 from polyswarm.io.carmen import read_carmen
 from polyswarm.io.tum import write_tum
-from polyswarm.odometry import IncrementNoise, noisy_odometry
+from polyswarm.odometry import IncrementNoise, OdometryBuffer, noisy_odometry
 from polyswarm.polymap import GridPolyMap, VectorType
+from polyswarm.scan import deskew_motion
 from polyswarm.se2 import compose
 from polyswarm.slam import PolySlam
 
@@ -141,14 +142,23 @@ def run_world(
     spent = 0.0
     with Simulation(world, cfg.sim, 1, start_poses=[start]) as sim:
         follower = PurePursuit(route, speed=speed_mps)
-        slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=start, keep_trajectory=True)
+        slam = PolySlam(
+            cfg.slam,
+            cfg.map.cell_size_m,
+            initial_pose=start,
+            keep_trajectory=True,
+            out_of_range=cfg.sim.lidar.out_of_range,
+        )
+        odometry = OdometryBuffer()
         limit_s = 3.0 * total / speed_mps + 120.0  # a stuck robot must not run forever
         while not follower.done and sim.time < limit_s:
             for e in sim.step():
                 t0 = time.perf_counter()
-                step = slam.process(e.scan, e.odom)
+                odometry.add(sim.time, e.odom)  # a rolling sweep is de-skewed to its end
+                motion = deskew_motion(e.scan, odometry.at_many)
+                step = slam.process(e.scan, odometry.at(e.scan.end_stamp), motion)
                 spent += time.perf_counter() - t0
-                stamps.append(e.scan.stamp)
+                stamps.append(e.scan.end_stamp)
                 est.append(step.pose)
                 gt.append(e.true_pose)
                 odo.append(compose(start, e.odom))  # in the map frame, for the baseline
