@@ -35,17 +35,10 @@ import numpy as np
 from agents import persist
 from polyswarm.config import Config
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
-from polyswarm.explore import (
-    GraphIndex,
-    Reach,
-    Strategy,
-    Target,
-    TargetCache,
-    assign,
-    frontier_targets,
-)
-from polyswarm.navgraph import NavGraph
-from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions
+from polyswarm.explore import GraphIndex, Reach, Strategy, assign, target_groups
+from polyswarm.navgraph import NavGraph, clear_of
+from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions, VectorType
+from polyswarm.targets import Sensor, Target, TargetCache, frontier_targets
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import (
     decode_any_map,
@@ -82,6 +75,13 @@ REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave
 # manage a single cycle in end_confirm_s, and one cycle on a lagging map must not end it
 END_CONFIRM_CYCLES = 3
 MERGE_PERIOD_S = 1.0  # robots' changed cells are merged at least this often (batched)
+# after a look, a frontier point farther than this from every frontier vector has moved
+# on (the view opened the space behind it); the look failed if most (LOOK_OPEN_SHARE)
+# of the frontier's points did not. A TurtleBot3 at a door sees 3.5 m into the room: the
+# frontier moves on, and judging by the target's id (a frontier near the same goal) ten
+# frontiers were blacklisted after one look each and the mission ended at 29 %
+LOOK_MOVED_M = 0.25
+LOOK_OPEN_SHARE = 0.5
 
 
 @dataclass
@@ -129,6 +129,7 @@ class Coordinator:
             obstacle_snap_behind_m=cfg.slam.obstacle_snap_behind_m,
             obstacle_snap_front_m=cfg.slam.obstacle_snap_front_m,
         )
+        self.sensor = Sensor.of(cfg.sim.lidar)  # the robots' lidar: how far they see
         self.targets: dict[int, Target] = {}
         self._target_cache = TargetCache()  # frontier facts reused while their cells stay
         # target ids differ from those of an earlier run of the coordinator (a restart):
@@ -225,10 +226,11 @@ class Coordinator:
             if a.kind == AssignmentKind.HOME:
                 info.home_failed = True  # exploring is over; a robot short of home is fine
                 log.info("robot %s cannot get home (%s)", rid, status.state)
-            elif status.state == RobotState.UNREACHABLE:
+            else:
+                # no path on the map, or a robot that could not get on after recovering
+                # (agents.behaviour): it hands the target back, and is not sent there again
+                # for a while; repeated, the target is given up
                 self._failed(info, a.target, str(status.state))
-            # a robot stuck on its way to a frontier keeps trying; the progress watch
-            # (explore.no_progress_timeout_s) judges it, and whether the target is to blame
         elif (
             status.state == RobotState.REACHED
             and a.kind == AssignmentKind.EXPLORE
@@ -424,6 +426,7 @@ class Coordinator:
             self.blacklist,
             reach=reach,
             cache=self._target_cache,
+            sensor=self.sensor,
         )
         # keep ids: a target near last cycle's is the same target
         old_ids = list(self.targets)
@@ -464,7 +467,11 @@ class Coordinator:
             self.cfg.explore.hysteresis,
             goals,
             self.cfg.explore.target_separation_m,
-            [targets[t].frontier.chain for t in ids],
+            target_groups(
+                [targets[t].frontier.chain for t in ids],
+                goals,
+                self.cfg.explore.target_separation_m,
+            ),
         )
         for k, (r, j) in enumerate(zip(live, choice, strict=True)):
             if j is None:
@@ -501,11 +508,16 @@ class Coordinator:
             if a is None or a.kind != AssignmentKind.EXPLORE or a.target not in ids:
                 continue
             if self._looked(r):
-                # the robot stood there and looked, and the frontier is still open: a
-                # failure, and after explore.blacklist_after_looks such looks given up
-                # (another look from elsewhere could close it, but on the maze a second
-                # look rarely did and cost more than the frontiers were worth)
                 r.reached_t = None
+                if not self._look_failed(r, a):
+                    # what it saw moved the frontier on (a short-range lidar sees a room a
+                    # few metres at a time): no failure, a new target at the next cycle
+                    r.assignment = None
+                    self._wake = True
+                    continue
+                # the robot looked from within sensor range, and the frontier is still
+                # open where it was: a failure, and after explore.blacklist_after_looks
+                # such looks given up
                 n = self.looks[a.target] = self.looks.get(a.target, 0) + 1
                 t = self.targets.get(a.target)
                 self._failed(r, a.target, "reached, frontier still open")
@@ -538,6 +550,24 @@ class Coordinator:
         if r.reached_t is None or r.pose_t - r.reached_t < REACHED_GRACE_S:
             return False
         return r.map is not None and r.map.version >= r.announced and r.id not in self._pending
+
+    def _look_failed(self, r: RobotInfo, a: Assignment) -> bool:
+        """Did the robot look at its frontier from within sensor range and leave it open
+        where it was (most of its points still on a frontier of the merged map)?"""
+        pts = np.array(a.frontier, dtype=float).reshape(-1, 2)
+        if len(pts) == 0:
+            return True
+        mid = pts[len(pts) // 2]
+        if r.pose is None or math.dist(r.pose[:2], mid) > self.sensor.range_m:
+            return False  # not a look the frontier can be blamed for
+        cells = {
+            c
+            for p in pts[:: max(1, len(pts) // 8)]
+            for c in self.merged.cells_within(p[0], p[1], LOOK_MOVED_M + 1.0)
+        }
+        st, en, _ = self.merged.vectors([VectorType.FRONTIER], cells)
+        still = ~clear_of(pts, st, en, LOOK_MOVED_M)
+        return bool(still.mean() >= LOOK_OPEN_SHARE)
 
     def _failed(self, r: RobotInfo, tid: int, why: str, counts: bool = True) -> None:
         """``counts``: the failure counts towards blacklisting the target."""

@@ -6,11 +6,12 @@ wires it to a Zenoh session. The same program runs on a real robot; only the sou
 of scans and odometry and the sink of velocity commands change.
 
 Per scan (``RobotAgent.on_scan``), in order:
-  1. odometry at the scan time;
+  1. odometry at the scan time, and over its sweep (de-skewing);
   2. PolySLAM (pre-align, ICP, keyframe polygon, refine, merge): pose and map delta;
-  3. navigation: (re)plan to the assigned goal on the merged map (own map without one);
-  4. local control: dynamic window around the path, avoiding what the scan sees;
-  5. state: reached / unreachable / stuck for the coordinator.
+  3. behaviour (``agents.behaviour``): plan to the assigned goal on the merged map (own
+     map without one), follow the path around what the scan sees, look, recover, give
+     way: the velocity command;
+  4. what to send: pose, the map delta, the state for the coordinator.
 """
 
 from __future__ import annotations
@@ -24,9 +25,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from agents import persist
+from agents.behaviour import Behaviour
 from polyswarm.config import Config
-from polyswarm.control import ControlParams, Follow, PathFollower
-from polyswarm.errors import DecodeError, DeltaGapError, MapError, PlanningError, PolyswarmError
+from polyswarm.control import ControlParams, PathFollower
+from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.navgraph import NavGraph, clear_of
 from polyswarm.odometry import OdometryBuffer
 from polyswarm.planner import Planner
@@ -45,7 +47,6 @@ from protocols.mapcodec import (
 )
 from protocols.messages import (
     Assignment,
-    AssignmentKind,
     CoordinatorStatus,
     MapChunk,
     MapKind,
@@ -58,16 +59,10 @@ from protocols.messages import (
 
 log = logging.getLogger(__name__)
 
-REPLAN_PERIOD_S = 2.0  # a path is replanned this often as the map grows (sim seconds)
-STUCK_TIMEOUT_S = 8.0  # no progress along the path for this long: stuck
-PROGRESS_M = 0.2  # ... progress means the remaining path shrank by this much
 POSE_PERIOD_S = 0.5  # pose messages to the coordinator (2 Hz)
 STATUS_PERIOD_S = 1.0
 UNEXPLAINED_M = 0.15  # a scan point this far from the map's obstacles is not a wall
 NEAR_M = 4.0  # map vectors within this of the robot are used by the local checks
-DEADLOCK_S = 2.0  # blocked this long next to another robot: the lower priority gives way
-YIELD_S = 6.0  # ... driving about a metre away for at most this long
-PEER_NEAR_M = 1.5
 PEER_FRESH_S = 2.0
 # scan returns this close to another robot's last pose (radius 0.2 m, poses 2 Hz at up to
 # 0.5 m/s, and both robots' pose errors) are that robot: dropouts for SLAM. In a corridor
@@ -75,15 +70,6 @@ PEER_FRESH_S = 2.0
 # matched, a robot that had moved dragged its teammates' ICP down the corridor (zigzag,
 # first lane: jumps of 2.5 and 4.2 m along it)
 PEER_MASK_M = 0.6
-FACING_RAD = 0.3  # at the goal, turn until the frontier is this close to straight ahead
-UNREACHABLE_AFTER_S = 3.0  # planning must fail this long before a target is unreachable
-PLAN_RETRY_S = 0.5  # ... retried this often meanwhile
-# At start a robot turns in place this far before anything else: a 270 degree lidar
-# leaves a wedge behind the robot unseen, with the robot at its tip, so a lone robot
-# has no room for its disc in its first map (measured: one robot on the thesis' loop
-# could reach no frontier and the mission ended after 7 s)
-START_TURN_RAD = math.pi
-START_TURN_MAX_S = 10.0  # ... but no longer than this (a robot whose odometry shows no turn)
 SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
 
@@ -103,8 +89,6 @@ class Outbox:
 class AgentStats:
     scans: int = 0
     keyframes: int = 0
-    plans: int = 0
-    plan_failures: int = 0
     distance_m: float = 0.0
     peer_returns_masked: int = 0  # scan returns taken for other robots, kept from SLAM
     slam_ms: list[float] = field(default_factory=list)
@@ -115,49 +99,48 @@ class RobotAgent:
         self.id = check_name(robot_id, "robot id")
         self.cfg = cfg
         self.start_pose = np.array(start_pose, dtype=float)
+        lidar = cfg.sim.lidar
         self.slam = PolySlam(
-            cfg.slam, cfg.map.cell_size_m, self.start_pose, out_of_range=cfg.sim.lidar.out_of_range
+            cfg.slam, cfg.map.cell_size_m, self.start_pose, out_of_range=lidar.out_of_range
         )
         self.radius = cfg.nav.obstacle_clearance_m
         rc = cfg.sim.robot
-        self.follower = PathFollower(
+        follower = PathFollower(
             ControlParams(
                 radius_m=cfg.nav.robot_radius_m,
                 max_v_mps=rc.max_linear_mps,
                 max_w_radps=rc.max_angular_radps,
                 max_accel_mps2=rc.max_linear_accel_mps2,
                 max_angular_accel_radps2=rc.max_angular_accel_radps2,
-                period_s=1.0 / cfg.sim.lidar.rate_hz,
+                period_s=1.0 / lidar.rate_hz,
             )
         )
+        self.behaviour = Behaviour(self.id, follower, self, rc.max_angular_radps, lidar.fov_rad)
         self.merged: GridPolyMap | None = None
         self.merged_graph: NavGraph | None = None
         self.own_graph: NavGraph | None = None
         self._own_graph_version = -1
-        self.assignment: Assignment | None = None
-        self.state = RobotState.IDLE
-        self.detail = ""
         self.pose = self.start_pose.copy()
         self.odometry = OdometryBuffer(ODOM_BUFFER)
-        self._last_plan_t = -math.inf
-        self._best_remaining = math.inf
-        self._progress_t = 0.0
         self._last_pose_t = -math.inf
         self._last_status_t = -math.inf
-        self._status_dirty = True
         self._last_odom_xy: np.ndarray | None = None
-        self._facing = False  # at the goal, turning towards the frontier
-        self._plan_fail_since: float | None = None  # planning fails since (retrying)
         self.peers: dict[str, tuple[float, np.ndarray]] = {}  # other robots: (stamp, xy)
-        self._blocked_since: float | None = None
-        self._yield_until: float | None = None
-        self._blocked_by = ""
-        self._resume = False
-        self._turn_left_rad = START_TURN_RAD
-        self._turn_until_s: float | None = None
         self.stats = AgentStats()
         self.bytes_sent = 0  # maintained by the transport
         self.journaled = 0  # deltas persisted since the last snapshot (0: none yet)
+
+    @property
+    def state(self) -> RobotState:
+        return self.behaviour.state
+
+    @property
+    def assignment(self) -> Assignment | None:
+        return self.behaviour.assignment
+
+    @property
+    def follower(self) -> PathFollower:
+        return self.behaviour.follower
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -185,23 +168,7 @@ class RobotAgent:
         return self.odometry.at(stamp_s)
 
     def on_assignment(self, a: Assignment, now_s: float) -> None:
-        same = (
-            self.assignment is not None
-            and a.target == self.assignment.target
-            and a.kind == self.assignment.kind
-            and a.goal == self.assignment.goal
-        )
-        self.assignment = a
-        if same:
-            return
-        log.info("%s: assignment %s %d at (%.1f, %.1f)", self.id, a.kind, a.target, *a.goal)
-        self._plan_fail_since = None
-        self.follower.set_path(None)
-        self._facing = False
-        if a.kind == AssignmentKind.STOP:
-            self._set_state(RobotState.IDLE, "stopped by the coordinator")
-            return
-        self._plan(now_s)
+        self.behaviour.on_assignment(a, now_s, self.pose)
 
     def on_merged_map(self, pmap: GridPolyMap) -> None:
         """A full merged map (first contact or resync)."""
@@ -214,6 +181,12 @@ class RobotAgent:
             raise DeltaGapError("no merged map yet")
         self.merged = self.merged.apply_delta(delta)
         self.merged_graph.update(self.merged, {c.index for c in delta.cells})
+
+    def on_peer_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
+        if rid == self.id:
+            return
+        self.peers[rid] = (stamp_s, np.array([pose.x, pose.y]))
+        self.behaviour.on_peer(rid, stamp_s, self.peers[rid][1], pose.blocked_by, self.pose)
 
     # -- the per-scan step ------------------------------------------------------------------
 
@@ -236,60 +209,22 @@ class RobotAgent:
             self.stats.keyframes += 1
             self.stats.slam_ms.append(step.timings_ms.get("total", 0.0))
         out.delta, out.op = step.delta, step.op
-        # 3. navigation: replan as the map grows (at the goal, wait for the next order:
-        #    a replan there would report the goal reached again and again)
-        at_goal = self.state in (RobotState.REACHED, RobotState.HOME)
-        if (
-            self.assignment is not None
-            and self.assignment.kind != AssignmentKind.STOP
-            and not at_goal
-        ):
-            due = stamp_s - self._last_plan_t >= REPLAN_PERIOD_S
-            retry = stamp_s - self._last_plan_t >= PLAN_RETRY_S
-            if due or (
-                self.follower.path is None and self.state == RobotState.NAVIGATING and retry
-            ):
-                self._plan(stamp_s)
-        # 4. local control around the path, avoiding what the scan sees (farther from
-        #    what the map does not explain: other robots, people)
+        # 3. behaviour: the command, following the path around what the scan sees (farther
+        #    from what the map does not explain: other robots, people)
         pts = scan_to_points(scan, self.cfg.slam.frontier_range_m, self._mount())
         xy = pts.xy[pts.valid]
-        cmd = self.follower.command(self.pose, xy, self._unexplained(xy))
-        out.cmd = (cmd.v_mps, cmd.w_radps)
-        if self._facing:
-            out.cmd = self._face_frontier()
-        if self._turn_left_rad > 0:  # the start turn comes first
-            if self._turn_until_s is None:
-                self._turn_until_s = stamp_s + START_TURN_MAX_S
-            self._turn_left_rad -= turned
-            if stamp_s >= self._turn_until_s:
-                self._turn_left_rad = 0.0
-            out.cmd = (0.0, 0.8 * self.cfg.sim.robot.max_angular_radps)
-        self.follower.sent(*(out.cmd or (0.0, 0.0)))  # arcs start from what the base does
-        # 5. state for the coordinator; two robots blocking each other: one gives way
-        if self._yield_until is not None:
-            self._end_yield(cmd.state, stamp_s)
-        else:
-            self._track(cmd.state, stamp_s)
-            self._watch_deadlock(cmd.state, stamp_s)
+        out.cmd = self.behaviour.step(stamp_s, self.pose, xy, self._unexplained(xy), turned)
+        self.follower.sent(*out.cmd)  # arcs start from what the base does
+        # 4. pose and state for the coordinator
         if stamp_s - self._last_pose_t >= POSE_PERIOD_S or step.delta is not None:
             self._last_pose_t = stamp_s
-            out.pose = Pose(*map(float, self.pose), self.slam.map.version, self._blocked_by)
-        if self._status_dirty or stamp_s - self._last_status_t >= STATUS_PERIOD_S:
+            blocked_by = self.behaviour.blocked_by
+            out.pose = Pose(*map(float, self.pose), self.slam.map.version, blocked_by)
+        if self.behaviour.changed or stamp_s - self._last_status_t >= STATUS_PERIOD_S:
             self._last_status_t = stamp_s
-            self._status_dirty = False
+            self.behaviour.changed = False
             out.status = self.status()
         return out
-
-    def on_peer_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
-        if rid == self.id:
-            return
-        self.peers[rid] = (stamp_s, np.array([pose.x, pose.y]))
-        if pose.blocked_by == self.id and self._yield_until is None:
-            # I stand in its way: give way unless we block each other and I go first
-            mutual = self._blocked_by == rid and _priority(self.id) < _priority(rid)
-            if not mutual and not self._facing:
-                self._give_way(rid, self.peers[rid][1], stamp_s)
 
     def _without_peers(self, scan: LaserScan, now_s: float) -> LaserScan:
         """The scan with returns from other robots (within ``PEER_MASK_M`` of a fresh
@@ -323,99 +258,47 @@ class RobotAgent:
         st, en, _ = m.vectors([VectorType.OBSTACLE], m.cells_within(*self.pose[:2], NEAR_M))
         return clear_of(world, st, en, UNEXPLAINED_M)
 
-    def _watch_deadlock(self, follow: Follow, now_s: float) -> None:
-        if follow != Follow.BLOCKED:
-            self._blocked_since = None
-            self._blocked_by = ""
-            return
-        if self._blocked_since is None:
-            self._blocked_since = now_s
-            return
-        if now_s - self._blocked_since < DEADLOCK_S:
-            return
-        peer = self._nearest_peer(now_s)
-        self._blocked_by = "" if peer is None else peer[0]  # told to it with the pose
-        if peer is None or _priority(self.id) < _priority(peer[0]):
-            return  # nobody to give way to, or the other robot gives way
-        self._give_way(peer[0], peer[1], now_s)
-
-    def _give_way(self, rid: str, other: np.ndarray, now_s: float) -> None:
-        goal = self._yield_point(other)
-        if goal is None:
-            return
-        log.info("%s: giving way to %s", self.id, rid)
-        self._yield_until = now_s + YIELD_S
-        self._blocked_since = None
-        self._blocked_by = ""
-        self._resume = self.follower.path is not None or self.state == RobotState.NAVIGATING
-        self.follower.set_path(np.array([self.pose[:2], goal]))
-
-    def _nearest_peer(self, now_s: float):
-        best = None
-        for rid, (t, xy) in self.peers.items():
-            d = float(np.hypot(*(xy - self.pose[:2])))
-            if now_s - t <= PEER_FRESH_S and d <= PEER_NEAR_M and (best is None or d < best[2]):
-                best = (rid, xy, d)
-        return best
-
-    def _yield_point(self, other: np.ndarray) -> np.ndarray | None:
-        """A free point about a metre away from the other robot."""
-        away = self.pose[:2] - other
-        base = math.atan2(away[1], away[0])
-        m = self.slam.map
-        st, en, _ = m.vectors(
-            [VectorType.OBSTACLE, VectorType.FRONTIER], m.cells_within(*self.pose[:2], NEAR_M)
-        )
-        for turn in (0.0, 0.6, -0.6, 1.2, -1.2, 1.8, -1.8):
-            for dist in (1.0, 0.6):
-                a = base + turn
-                p = self.pose[:2] + dist * np.array([math.cos(a), math.sin(a)])
-                if m.is_free(*p) and clear_of(p[None, :], st, en, self.radius)[0]:
-                    return p
-        return None
-
-    def _end_yield(self, follow: Follow, now_s: float) -> None:
-        if follow == Follow.ARRIVED or now_s >= self._yield_until:
-            self._yield_until = None
-            self.follower.set_path(None)
-            if self._resume:
-                self._plan(now_s)
-
-    def _face_frontier(self) -> tuple[float, float]:
-        """Turn in place towards the assigned frontier; then report it reached."""
-        pts = np.array(self.assignment.frontier)
-        mid = pts[len(pts) // 2] if len(pts) > 2 else pts.mean(axis=0)
-        bearing = math.remainder(
-            math.atan2(mid[1] - self.pose[1], mid[0] - self.pose[0]) - self.pose[2], 2 * math.pi
-        )
-        if abs(bearing) <= FACING_RAD:
-            self._facing = False
-            self.slam.request_keyframe()  # what it sees now goes into the map
-            self._set_state(RobotState.REACHED)
-            return (0.0, 0.0)
-        w = self.cfg.sim.robot.max_angular_radps
-        return (0.0, math.copysign(min(w, 2.0 * abs(bearing)), bearing))
-
     def _mount(self):
         m = self.cfg.slam.mount
         return (m.x_m, m.y_m, m.yaw_rad, m.upside_down)
 
     def status(self) -> RobotStatus:
+        b = self.behaviour
         return RobotStatus(
-            self.state,
-            -1 if self.assignment is None else self.assignment.target,
-            self.detail[:200],
+            b.state,
+            -1 if b.assignment is None else b.assignment.target,
+            b.detail[:200],
             self.slam.keyframes,
             self.slam.map.version,
             self.bytes_sent,
             self.stats.distance_m,
         )
 
-    def _set_state(self, state: RobotState, detail: str = "") -> None:
-        if state != self.state or detail != self.detail:
-            log.info("%s: %s %s", self.id, state, detail)
-            self.state, self.detail = state, detail
-            self._status_dirty = True
+    # -- what the behaviour asks (agents.behaviour.Planning) ------------------------------
+
+    def plan(self, start: np.ndarray, goal: np.ndarray, partial: bool):
+        """A path on the merged map (the robot's own before it has one)."""
+        pmap, graph = self._planning_map()
+        return Planner(pmap, graph).plan(start, goal, partial=partial)
+
+    def yield_point(self, xy: np.ndarray, other: np.ndarray) -> np.ndarray | None:
+        """A free point about a metre from ``xy``, away from the other robot."""
+        away = xy - other
+        base = math.atan2(away[1], away[0])
+        m = self.slam.map
+        st, en, _ = m.vectors(
+            [VectorType.OBSTACLE, VectorType.FRONTIER], m.cells_within(*xy, NEAR_M)
+        )
+        for turn in (0.0, 0.6, -0.6, 1.2, -1.2, 1.8, -1.8):
+            for dist in (1.0, 0.6):
+                a = base + turn
+                p = xy + dist * np.array([math.cos(a), math.sin(a)])
+                if m.is_free(*p) and clear_of(p[None, :], st, en, self.radius)[0]:
+                    return p
+        return None
+
+    def look_done(self) -> None:
+        self.slam.request_keyframe()  # what it sees now goes into the map
 
     def _planning_map(self) -> tuple[GridPolyMap, NavGraph]:
         if self.merged is not None and self.merged_graph is not None:
@@ -425,67 +308,6 @@ class RobotAgent:
             self.own_graph = NavGraph.for_robot(own, self.cfg.nav)
             self._own_graph_version = own.version
         return own, self.own_graph
-
-    def _plan(self, now_s: float) -> None:
-        a = self.assignment
-        if a is None or a.kind == AssignmentKind.STOP:
-            return
-        self._last_plan_t = now_s
-        pmap, graph = self._planning_map()
-        self.stats.plans += 1
-        try:
-            # a frontier's goal past a cut in the free space (a frontier just beyond a
-            # narrow door): drive as close as the map lets and look from there
-            explore = a.kind == AssignmentKind.EXPLORE
-            path = Planner(pmap, graph).plan(self.pose[:2], np.array(a.goal), partial=explore)
-        except PlanningError as e:
-            self.stats.plan_failures += 1
-            self.follower.set_path(None)
-            # the map may not hold the way yet (a delta in flight, a resync): retry for a
-            # while before telling the coordinator
-            if self._plan_fail_since is None:
-                self._plan_fail_since = now_s
-            if now_s - self._plan_fail_since < UNREACHABLE_AFTER_S:
-                self._set_state(RobotState.NAVIGATING, f"no path yet ({e}); retrying")
-            else:
-                self._set_state(RobotState.UNREACHABLE, str(e))
-            return
-        self._plan_fail_since = None
-        first = self.follower.path is None
-        self.follower.set_path(path.points)
-        if first or self.state not in (RobotState.NAVIGATING,):
-            self._best_remaining = math.inf
-            self._progress_t = now_s
-        short = "" if path.reaches_goal else ", as close as the map lets"
-        self._set_state(RobotState.NAVIGATING, f"{path.length_m:.1f} m to go{short}")
-
-    def _track(self, follow: Follow, now_s: float) -> None:
-        if self.assignment is None or self.follower.path is None:
-            return
-        if follow == Follow.ARRIVED:
-            self.follower.set_path(None)
-            home = self.assignment.kind == AssignmentKind.HOME
-            if not home and self.assignment.frontier:
-                self._facing = True  # look at the frontier before reporting
-                return
-            self._set_state(RobotState.HOME if home else RobotState.REACHED)
-            return
-        remaining = self.follower.remaining_m(self.pose)
-        if remaining < self._best_remaining - PROGRESS_M:
-            self._best_remaining = remaining
-            self._progress_t = now_s
-        elif now_s - self._progress_t > STUCK_TIMEOUT_S:
-            self._progress_t = now_s
-            self._best_remaining = math.inf
-            self._plan(now_s)  # a new path may get round what blocks this one
-            # after the replan (which says "navigating"): the status sent says stuck
-            self._set_state(RobotState.STUCK, f"no progress for {STUCK_TIMEOUT_S:.0f} s")
-
-
-def _priority(robot_id: str) -> tuple:
-    """Robots give way in id order (r2 gives way to r1; r10 to r9)."""
-    digits = "".join(ch for ch in robot_id if ch.isdigit())
-    return (int(digits) if digits else 0, robot_id)
 
 
 def scan_from_message(msg: Scan, stamp_s: float) -> LaserScan:

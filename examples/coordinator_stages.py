@@ -23,6 +23,7 @@ import numpy as np
 
 import agents.coordinator as coordinator_module
 import polyswarm.explore as explore_module
+import polyswarm.targets as targets_module
 from polyswarm.benchmarks.inproc import explore_in_process
 from polyswarm.navgraph import NavGraph
 from polyswarm.polymap import GridPolyMap
@@ -81,19 +82,19 @@ def main(sim_s: float = 60.0) -> None:
     timed(explore_module.Reach, "costs", "costs")
     timed(coordinator_module, "frontier_targets", "targets")
     counted(GridPolyMap, "_cells_that_change", "robot cells", "robot cells that change")
-    counted(explore_module, "_segment_facts", "frontiers recomputed", "_")
-    extract = explore_module.extract_frontiers
+    counted(targets_module, "_segment_facts", "frontiers recomputed", "_")
+    extract = targets_module.extract_frontiers
 
     def counted_extract(*args, **kwargs):  # only the coordinator looks for frontiers
         segs = extract(*args, **kwargs)
         counts["frontiers"] += len(segs)
         return segs
 
-    explore_module.extract_frontiers = counted_extract
+    targets_module.extract_frontiers = counted_extract
     # the parts of ``targets``
-    timed(explore_module, "extract_frontiers", "extract")
-    timed(explore_module, "_segment_facts", "facts")
-    timed(explore_module, "unexplored_behind", "behind")
+    timed(targets_module, "extract_frontiers", "extract")
+    timed(targets_module, "_segment_facts", "facts")
+    timed(targets_module, "unexplored_behind", "behind")
     rows: list[dict] = []
     cycle = Coordinator.cycle
 

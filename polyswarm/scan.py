@@ -34,7 +34,7 @@ import numpy as np
 NO_RETURN_RUN = 3  # beams: shorter runs of invalid beams between returns are dropouts
 # a no-return beam is trusted as free space to this share of the maximum range (the far
 # end of a sensor's range is where its misses are least certain)
-NO_RETURN_SHARE = 0.5
+NO_RETURN_SHARE = 0.8
 
 
 @dataclass(frozen=True, eq=False)

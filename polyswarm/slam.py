@@ -45,7 +45,7 @@ from polyswarm.polymap import (
 from polyswarm.posegraph import PoseGraph
 from polyswarm.refine import refine_polygon
 from polyswarm.scan import LaserScan, scan_to_points
-from polyswarm.se2 import compose, relative, wrap
+from polyswarm.se2 import compose, relative, transform_points, wrap
 from polyswarm.submap import KeyframeStore
 
 log = logging.getLogger(__name__)
@@ -55,6 +55,12 @@ log = logging.getLogger(__name__)
 METRES_PER_RADIAN = 2.0
 ODOMETRY_SIGMA_PER_M = 0.1  # std of odometry along a corridor, per metre travelled
 WEAK_SIGMA_M = 100.0  # std of a loop edge along a corridor: no information there
+# a scan that sees new space (slam.keyframe_novelty) is a keyframe once the robot has
+# moved this share of the way to the next one...
+NOVELTY_MIN_STEP = 0.25
+# ... judged by its beams' ends pulled back this far towards the sensor (a wall already
+# mapped lies on the explored space's edge, its noisy returns on either side of it)
+NOVELTY_PULL_M = 0.2
 
 
 def _rotate(v, angle: float) -> np.ndarray:
@@ -85,6 +91,15 @@ class KeyframeSelector:
             return True
         d = relative(self.last, odom)
         return bool(np.hypot(d[0], d[1]) >= self.distance_m or abs(d[2]) >= self.angle_rad)
+
+    def moved(self, odom: np.ndarray, share: float) -> bool:
+        """Has the robot moved ``share`` of the way to the next keyframe?"""
+        if self.last is None:
+            return True
+        d = relative(self.last, odom)
+        return bool(
+            np.hypot(d[0], d[1]) >= share * self.distance_m or abs(d[2]) >= share * self.angle_rad
+        )
 
     def mark(self, odom: np.ndarray) -> None:
         self.last = np.array(odom, dtype=float)
@@ -170,12 +185,6 @@ class PolySlam:
             if self._kf_pose is None
             else compose(self._kf_pose, relative(self._kf_odom, odom))
         )
-        # 2. keyframe selection
-        if not (self.selector.due(odom) or self._keyframe_requested):
-            self.pose, self.odom = pred, odom
-            if self.keep_trajectory:  # as seen from its keyframe, to follow corrections
-                self._steps.append((len(self.graph) - 1, relative(self._kf_pose, pred)))
-            return SlamStep(pred, False)
         t = {"start": time.perf_counter()}
         m = self.cfg.mount
         # 1. scan to points (robot frame, de-skewed; invalid beams become free space,
@@ -189,6 +198,15 @@ class PolySlam:
             motion,
         )
         t["points"] = time.perf_counter()
+        # 2. keyframe selection: enough travel or rotation, or a view of new space
+        due = self.selector.due(odom) or self._keyframe_requested
+        if not due and self.cfg.keyframe_novelty > 0 and self.map.cells:
+            due = self.selector.moved(odom, NOVELTY_MIN_STEP) and self._sees_new_space(points, pred)
+        if not due:
+            self.pose, self.odom = pred, odom
+            if self.keep_trajectory:  # as seen from its keyframe, to follow corrections
+                self._steps.append((len(self.graph) - 1, relative(self._kf_pose, pred)))
+            return SlamStep(pred, False)
         # 4. point-to-vector ICP against the obstacle vectors near the robot
         res = None
         pose = pred
@@ -244,6 +262,18 @@ class PolySlam:
             prev = t[name]
         ms["total"] = (t["merge"] - t["start"]) * 1e3
         return SlamStep(self.pose.copy(), True, delta, op, res, how, ms)
+
+    def _sees_new_space(self, points, pose) -> bool:
+        """Do ``keyframe_novelty`` of the scan's beams end (pulled back by
+        ``NOVELTY_PULL_M`` towards the sensor) outside the explored space?"""
+        rel = points.xy - points.origin
+        d = np.hypot(rel[:, 0], rel[:, 1])
+        keep = d > NOVELTY_PULL_M
+        if not keep.any():
+            return False
+        back = points.origin + rel[keep] * (1.0 - NOVELTY_PULL_M / d[keep])[:, None]
+        unknown = ~self.map.is_free_many(transform_points(pose, back))
+        return bool(unknown.mean() >= self.cfg.keyframe_novelty)
 
     # -- stage 4's reference and the pose graph ------------------------------------------
 

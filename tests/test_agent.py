@@ -6,7 +6,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from agents.robot import PEER_FRESH_S, STUCK_TIMEOUT_S, RobotAgent
+from agents.behaviour import MAX_RECOVERIES, STUCK_TIMEOUT_S
+from agents.robot import PEER_FRESH_S, RobotAgent
 from polyswarm.config import Config
 from polyswarm.polymap import VectorType
 from protocols.messages import Assignment, AssignmentKind, Odometry, Pose, RobotState
@@ -14,13 +15,13 @@ from tests.conftest import room_scan
 
 
 def test_a_robot_that_cannot_move_tells_the_coordinator_it_is_stuck():
-    # the wheels do nothing (odometry never changes): the status sent must say stuck,
-    # or a coordinator waiting for the robot to get home waits for ever
+    # the wheels do nothing (odometry never changes): after trying to get free, the status
+    # sent must say stuck, or a coordinator waiting for the robot to get home waits for ever
     agent = RobotAgent("r1", Config(), (0.0, 0.0, 0.0))
     home = Assignment(AssignmentKind.HOME, 7, (3.0, 0.0))
     sent = []
     t = 0.0
-    while t < 30.0:
+    while t < 90.0:
         agent.on_odom(t, Odometry(0.0, 0.0, 0.0))
         out = agent.on_scan(t, room_scan(t))
         if t == 0.0:
@@ -30,7 +31,8 @@ def test_a_robot_that_cannot_move_tells_the_coordinator_it_is_stuck():
         t = round(t + 0.1, 1)
     stuck = [s for s in sent if s[1] == RobotState.STUCK]
     assert stuck and stuck[0][2] == 7
-    assert stuck[0][0] >= STUCK_TIMEOUT_S  # not before the timeout
+    # not before it has tried: a timeout, then each recovery and its timeout
+    assert stuck[0][0] >= (MAX_RECOVERIES + 1) * STUCK_TIMEOUT_S
 
 
 def test_another_robot_in_the_scan_is_neither_mapped_nor_matched():

@@ -194,9 +194,13 @@ def test_the_mission_does_not_end_while_its_last_target_is_only_excluded():
 def test_a_robot_that_does_not_move_is_stuck_itself_and_the_target_stays_open():
     timeout = Config().explore.no_progress_timeout_s
     c, a = on_its_way()
-    # stuck reports on the way to a frontier are left to the progress watch
+    # a robot that hands its target back after failing to get free: a failure of it
     c.on_status("r1", c.now, RobotStatus(RobotState.STUCK, a.target))
-    assert c.failures == {} and c.robots["r1"].assignment.target == a.target
+    assert c.failures == {a.target: 1} and c.robots["r1"].assignment is None
+    c.failures.clear()
+    c.now += EXCLUDE_S
+    c.cycle()
+    a = c.robots["r1"].assignment
     # the robot stands still for longer than the timeout, again and again: each time the
     # target is taken from it, but none of these counts towards blacklisting the target
     for _ in range(3):
@@ -248,9 +252,37 @@ def test_a_reached_target_is_judged_on_the_map_the_robot_saw():
     c.now += 1.0
     c.cycle()
     assert c.failures == {a.target: 1}
-    # looking did not close it (explore.blacklist_after_looks = 1): it is given up
-    assert c.looks == {a.target: 1}
+    assert c.looks == {a.target: 1} and c.blacklist == []
+    # a second look, once the robot may take the target again, leaves it open too
+    # (explore.blacklist_after_looks = 2): it is given up
+    c.now += EXCLUDE_S
+    c.cycle()
+    again = c.robots["r1"].assignment
+    assert again is not None and again.target == a.target
+    c.on_status("r1", c.now, RobotStatus(RobotState.NAVIGATING, a.target))
+    c.on_status("r1", c.now, RobotStatus(RobotState.REACHED, a.target))
+    c.on_pose("r1", c.now + REACHED_GRACE_S, Pose(10.0, 1.0, 0.0, map_version=seen.version))
+    c.now += REACHED_GRACE_S + 1.0
+    c.cycle()
+    assert c.looks == {a.target: 2}
     assert any(np.allclose(b, a.goal) for b in c.blacklist)
+
+
+def test_a_look_that_moves_the_frontier_on_is_no_failure():
+    """A short-range lidar at a door sees a few metres into the room: the frontier moves
+    on (and a frontier near the same goal may keep the target's id); that look did its
+    job."""
+    c, a = on_its_way()
+    c.on_status("r1", 1.0, RobotStatus(RobotState.REACHED, a.target))
+    # what the robot saw at its goal: the corridor goes on 3 m, its end still open
+    further = corridor_map(open_end=True).merge(rect(0.0, 0.0, 15.0, 2.0, (O, F, O, O))).map
+    c.on_pose("r1", 1.0 + REACHED_GRACE_S, Pose(10.0, 1.0, 0.0, map_version=further.version))
+    feed(c, "r1", further, 5.0)
+    c.now += 2.0
+    c.cycle()
+    assert c.failures == {} and c.looks == {} and c.blacklist == []
+    b = c.robots["r1"].assignment
+    assert b is not None and b.goal[0] > a.goal[0] + 2.0  # sent on, further down
 
 
 def test_repeated_failures_blacklist_a_target():

@@ -8,7 +8,7 @@ import pytest
 from polyswarm.keyframe import keyframe_polygon
 from polyswarm.polymap import GridPolyMap, VectorType
 from polyswarm.raycast import cast_rays
-from polyswarm.scan import LaserScan, scan_to_points
+from polyswarm.scan import NO_RETURN_SHARE, LaserScan, scan_to_points
 
 # a 4 m x 4 m room, walls as segments
 ROOM = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=float)
@@ -49,9 +49,10 @@ def test_a_beam_with_no_return_crossed_free_space_a_dropout_did_not():
     pts = scan_to_points(scan, frontier_range_m=0.2, no_return_free_m=1.5)
     assert pts.valid.tolist() == [True, False, False, False, False, True]
     assert np.allclose(np.hypot(*pts.xy.T), [1.0, 1.5, 0.2, 0.2, 1.5, 2.0])
-    # never beyond half the sensor's range
+    # never beyond NO_RETURN_SHARE of the sensor's range
     short = LaserScan(np.array([np.inf] * 3), 0.0, 0.1, 0.05, 2.0)
-    assert np.hypot(*scan_to_points(short, 0.2, no_return_free_m=5.0).xy[0]) == pytest.approx(1.0)
+    far = np.hypot(*scan_to_points(short, 0.2, no_return_free_m=5.0).xy[0])
+    assert far == pytest.approx(NO_RETURN_SHARE * 2.0)
 
 
 def test_keyframe_of_a_square_room_is_the_room():

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyswarm.config import Config, RobotEntry
+from polyswarm.evaluation import coverage_tolerance, reachable_free
 from polyswarm.polymap import MapDelta, MergeOp
 from polyswarm.scan import LaserScan
 
@@ -64,7 +65,10 @@ def explore_in_process(
         coord.on_alive(a.id, True)
     delta_bytes = 0
     coverage: list[tuple[float, float]] = []
-    free = world.free
+    lid = cfg.sim.lidar
+    res = world.grid.resolution if world.grid is not None else 0.0
+    tol = coverage_tolerance(lid.noise_sigma_m, lid.noise_sigma_per_m, res)
+    free = reachable_free(world.free, cfg.sim.robot.radius_m, starts, tol)
     next_sample = 0.0
     with Simulation(world, cfg.sim, robots, start_poses=starts) as sim:
         while sim.time < sim_s:

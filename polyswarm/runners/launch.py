@@ -34,7 +34,7 @@ import shapely
 from agents.session import Bus, SessionSpec, open_session
 from polyswarm.config import Config, RobotEntry, config_to_dict, save_config, with_overrides
 from polyswarm.errors import ConfigError, DecodeError, MapError, PolyswarmError
-from polyswarm.evaluation import time_to_coverage
+from polyswarm.evaluation import coverage_tolerance, map_iou, reachable_free, time_to_coverage
 from polyswarm.polymap import GridPolyMap, MapDelta
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta, decode_map
@@ -140,8 +140,17 @@ class Observer:
 
     def __init__(self, world, cfg: Config, ids: list[str]) -> None:
         self.world = world
-        self.truth_free = world.free
-        self.truth_area = float(world.free.area)
+        # coverage counts the free space the robots' footprint can reach, less a band of
+        # the lidar's noise along walls (polyswarm.evaluation.reachable_free); the map's
+        # IoU is taken against all free space
+        lid = cfg.sim.lidar
+        res = world.grid.resolution if world.grid is not None else 0.0
+        self.tolerance_m = coverage_tolerance(lid.noise_sigma_m, lid.noise_sigma_per_m, res)
+        starts = [r.start for r in cfg.robots] or [world.start]
+        self.truth_free = reachable_free(
+            world.free, cfg.sim.robot.radius_m, starts, self.tolerance_m
+        )
+        self.truth_area = float(self.truth_free.area)
         shapely.prepare(self.truth_free)
         self.merged = GridPolyMap(cfg.map.cell_size_m)
         self.robots = {rid: RobotView() for rid in ids}
@@ -179,9 +188,7 @@ class Observer:
         return self.covered_area() / max(self.truth_area, 1e-9)
 
     def iou(self) -> float:
-        inter = self.covered_area()
-        union = self.merged.explored_area() + self.truth_area - inter
-        return inter / union if union > 0 else 0.0
+        return map_iou(self.merged.explored_region(), self.world.free)
 
     def on_merged(self, delta: MapDelta) -> None:
         self.merged = self.merged.apply_delta(delta)
@@ -245,6 +252,9 @@ class Observer:
             "t90_s": time_to_coverage(cov, 0.90),
             "t99_s": time_to_coverage(cov, 0.99),
             "final_coverage": cov[-1][1] if cov else 0.0,
+            "unexplored_reachable_m2": self.truth_area - self.covered_area(),
+            "reachable_free_m2": self.truth_area,
+            "coverage_tolerance_m": self.tolerance_m,
             "sim_time_s": self.sim_t,
             "total_path_length_m": sum(v.path_length_m for v in self.robots.values()),
             "per_robot_path_length_m": {k: v.path_length_m for k, v in self.robots.items()},
