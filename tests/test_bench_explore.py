@@ -26,3 +26,52 @@ def test_plan_runs_every_world_robot_count_and_seed_from_the_first_seed():
 def test_plan_runs_start_at_seed_zero_by_default():
     runs = plan_runs(["data:cross"], [1], seeds=3, nearest=True)
     assert [r.seed for r in runs] == [0, 1, 2]  # and no nearest with one robot
+
+
+def _row(world, robots, seed, t99, profile="turtlebot3", **over):
+    row = {
+        "world": world,
+        "robots": robots,
+        "strategy": "hungarian",
+        "seed": seed,
+        "profile": profile,
+        "t99_s": t99,
+        "unexplored_reachable_m2": 0.5 if t99 else 40.0,
+        "map_iou": 0.97,
+        "wall_collisions": 0,
+        "robot_collisions": 0,
+        "crashed_processes": [],
+        "wall_time_s": 100.0,
+    } | over
+    from polyswarm.benchmarks.explore import succeeded
+
+    row["success"] = succeeded(row)
+    return row
+
+
+def test_summary_gives_per_profile_and_world_the_seeds_the_reference_and_the_worst():
+    from polyswarm.benchmarks.explore import summarise
+
+    rows = [
+        _row("office", 3, 0, 200.0),
+        _row("office", 3, 1, 300.0),
+        _row("office", 3, 2, None),  # never reached 99 %
+        _row("rooms", 3, 0, 50.0, wall_collisions=1),  # reached, but hit a wall
+    ]
+    res = summarise(rows, {("turtlebot3", "office", 3): 160.0, ("turtlebot3", "rooms", 3): 40.0})
+    office = res["profiles"]["turtlebot3"]["office"]["3"]
+    assert office["t99_s"] == [200.0, 300.0, None]
+    assert office["t99_median_s"] == 300.0  # the failed run counts as infinitely slow
+    assert office["reference_t99_s"] == 160.0
+    assert office["t99_ratio_vs_reference"] == 300.0 / 160.0
+    assert office["t99_ratio_vs_reference_worst"] is None  # one run never got there
+    assert office["success_rate"] == 2 / 3
+    assert office["unexplored_reachable_m2_max"] == 40.0
+    rooms = res["profiles"]["turtlebot3"]["rooms"]["3"]
+    assert rooms["success_rate"] == 0.0 and rooms["t99_ratio_vs_reference"] == 50.0 / 40.0
+    assert res["success_rate"] == 2 / 4 and res["wall_collisions"] == 1
+
+
+def test_plan_runs_carry_the_profile():
+    runs = plan_runs(["office"], [3], seeds=1, nearest=False, profile="turtlebot4")
+    assert [(r.world, r.profile) for r in runs] == [("office", "turtlebot4")]

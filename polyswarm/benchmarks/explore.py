@@ -1,9 +1,13 @@
 """``polyswarm bench explore``: whole explorations, and the coordinator under 10 robots.
 
 1. Explorations: ``polyswarm launch`` (every part its own process, Zenoh on loopback)
-   per world x robot count x strategy x seed; t99 (simulated seconds to 99% of the
-   reachable free space), success, collisions, crashed processes and merged-map IoU.
-   Compared with the idealised reference of the multi-robot issue (REFERENCE_T99_S).
+   per world x robot count x strategy x seed, with a robot profile
+   (``polyswarm.profiles``); t99 (simulated seconds to 99 % of the free space the
+   robots' footprint reaches, ``polyswarm.evaluation.reachable_free``), collisions,
+   crashed processes, merged-map IoU and the reachable area left unexplored. Each is
+   compared with the idealised reference (``polyswarm.benchmarks.reference``) run for
+   the same world, robot count, start, sensor range, field of view, speed and radius:
+   nothing is typed in.
 2. Coordinator cycle with 10 robots: the agents, the simulator and the coordinator in one
    process (no Zenoh: the cycle is what is measured, not the transport), deltas passed
    through the wire codec; the coordinator's cycle time (merge + frontiers + costs +
@@ -25,19 +29,8 @@ import numpy as np
 
 log = logging.getLogger(__name__)
 
-# t99 in simulated seconds of the idealised reference (grid planner, perfect localisation,
-# 0.5 m/s, robots 1 m apart ~2 m inside the lower-left corner), from the multi-robot issue
-REFERENCE_T99_S = {
-    ("data:loop", 1): 462.0,
-    ("data:cross", 1): 698.0,
-    ("data:maze", 1): 1185.0,
-    ("data:zigzag", 1): 1385.0,
-    ("data:loop", 3): 220.0,
-    ("data:cross", 3): 276.0,
-    ("data:maze", 3): 429.0,
-    ("data:zigzag", 3): 1309.0,
-}
 REFERENCE_SLACK = 1.5  # our t99 may be at most this times the reference
+MIN_IOU = 0.95  # a successful run's merged map against the world's free space
 DATA_WORLDS = ("data:loop", "data:cross", "data:maze", "data:zigzag")
 NEAREST_WORLDS = ("data:maze", "data:loop")  # where hungarian must beat nearest by 25%
 
@@ -48,18 +41,26 @@ class RunSpec:
     robots: int
     strategy: str
     seed: int
+    profile: str = "thesis"
 
 
 def plan_runs(
-    worlds: list[str], robots: list[int], seeds: int, nearest: bool, first_seed: int = 0
+    worlds: list[str],
+    robots: list[int],
+    seeds: int,
+    nearest: bool,
+    first_seed: int = 0,
+    profile: str = "thesis",
 ) -> list[RunSpec]:
     """World x robot count (hungarian) x seed (``first_seed`` .. ``first_seed + seeds -
     1``), plus 3-robot ``nearest`` on NEAREST_WORLDS."""
     seed_range = range(first_seed, first_seed + seeds)
-    runs = [RunSpec(w, n, "hungarian", s) for w in worlds for n in robots for s in seed_range]
+    runs = [
+        RunSpec(w, n, "hungarian", s, profile) for w in worlds for n in robots for s in seed_range
+    ]
     if nearest:
         runs += [
-            RunSpec(w, max(robots), "nearest", s)
+            RunSpec(w, max(robots), "nearest", s, profile)
             for w in worlds
             if w in NEAREST_WORLDS and max(robots) > 1
             for s in seed_range
@@ -68,6 +69,7 @@ def plan_runs(
 
 
 def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float) -> dict:
+    from polyswarm.config import Config, with_profile
     from polyswarm.runners.launch import LaunchOptions, launch
 
     opts = LaunchOptions(
@@ -79,16 +81,19 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         wall_limit_s=wall_limit_s,
         stop_coverage=0.99,  # t99 is what is measured; returning home is not
         out=out,
+        config=with_profile(Config(), spec.profile),
     )
     m = launch(opts).metrics
-    return {
+    row = {
         "world": spec.world,
         "robots": spec.robots,
         "strategy": spec.strategy,
         "seed": spec.seed,
+        "profile": spec.profile,
         "t90_s": m["t90_s"],
         "t99_s": m["t99_s"],
         "final_coverage": m["final_coverage"],
+        "unexplored_reachable_m2": m["unexplored_reachable_m2"],
         "map_iou": m["map_iou"],
         "wall_collisions": m["collisions"]["walls"],
         "robot_collisions": m["collisions"]["robots"],
@@ -98,6 +103,35 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         "bytes_sent_per_robot": m["bytes_sent_per_robot"],
         "out": str(out),
     }
+    row["success"] = succeeded(row)
+    return row
+
+
+def succeeded(row: dict) -> bool:
+    """99 % reached, no collision, no crashed process, the merged map right."""
+    return bool(
+        row["t99_s"] is not None
+        and row["wall_collisions"] == 0
+        and row["robot_collisions"] == 0
+        and not row["crashed_processes"]
+        and (row["map_iou"] or 0.0) >= MIN_IOU
+    )
+
+
+def reference_t99(spec: RunSpec) -> float | None:
+    """The reference's t99 for a run's world, robots, profile and start (cached)."""
+    from polyswarm.benchmarks.reference import reference_run
+    from polyswarm.config import Config, with_profile
+    from polyswarm.evaluation import coverage_tolerance
+    from sim import load_world, spread_start_poses
+
+    cfg = with_profile(Config(), spec.profile)
+    world = load_world(spec.world, seed=spec.seed)
+    start = spread_start_poses(world, spec.robots, cfg.sim.robot.radius_m)[0]
+    lid = cfg.sim.lidar
+    res = world.grid.resolution if world.grid is not None else 0.0
+    tol = coverage_tolerance(lid.noise_sigma_m, lid.noise_sigma_per_m, res)
+    return reference_run(spec.world, spec.robots, cfg, start[:2], tol, seed=spec.seed)["t99_s"]
 
 
 def _median_or_none(values: list[float | None]) -> float | None:
@@ -110,33 +144,63 @@ def _median_or_none(values: list[float | None]) -> float | None:
     return None if math.isinf(med) else float(med)
 
 
-def summarise(rows: list[dict]) -> dict:
-    t99: dict[str, dict[str, float | None]] = {}
-    groups: dict[tuple[str, int, str], list] = {}
+def summarise(rows: list[dict], references: dict | None = None) -> dict:
+    """Per profile, world and robot count (hungarian): t99 per seed and its median, the
+    reference and the ratios (median and worst), success rate, the reachable area left
+    unexplored at worst; and the 3-against-1-robot and hungarian-against-nearest ratios."""
+    references = references or {}
+    per: dict = {}
+    for r in rows:
+        if r["strategy"] != "hungarian":
+            continue
+        cell = per.setdefault(r.get("profile", "thesis"), {}).setdefault(r["world"], {})
+        cell.setdefault(str(r["robots"]), []).append(r)
+    profiles: dict = {}
+    for prof, worlds in per.items():
+        for w, by_n in worlds.items():
+            for n, rs in by_n.items():
+                t99 = [r["t99_s"] for r in sorted(rs, key=lambda r: r["seed"])]
+                med = _median_or_none(t99)
+                ref = references.get((prof, w, int(n)))
+                ratios = [None if t is None or not ref else t / ref for t in t99]
+                profiles.setdefault(prof, {}).setdefault(w, {})[n] = {
+                    "t99_s": t99,
+                    "t99_median_s": med,
+                    "reference_t99_s": ref,
+                    "t99_ratio_vs_reference": None if med is None or not ref else med / ref,
+                    "t99_ratio_vs_reference_worst": (
+                        None if any(x is None for x in ratios) or not ratios else max(ratios)
+                    ),
+                    "success_rate": sum(r.get("success", False) for r in rs) / len(rs),
+                    "unexplored_reachable_m2_max": max(r["unexplored_reachable_m2"] for r in rs),
+                    "map_iou_min": min(r["map_iou"] for r in rs),
+                }
+    groups: dict = {}  # (world, robots, strategy) -> t99 of every run
     for r in rows:
         groups.setdefault((r["world"], r["robots"], r["strategy"]), []).append(r["t99_s"])
-    for (w, n, s), vals in sorted(groups.items()):
-        t99.setdefault(w, {})[f"{n}_{s}"] = _median_or_none(vals)
-    ratio_3_vs_1, ratio_vs_nearest, vs_reference = {}, {}, {}
-    for w, d in t99.items():
-        one, three, near = d.get("1_hungarian"), d.get("3_hungarian"), d.get("3_nearest")
+    t99 = {key: _median_or_none(v) for key, v in groups.items()}
+    ratio_3_vs_1, ratio_vs_nearest = {}, {}
+    for w in {k[0] for k in t99}:
+        one, three, near = (
+            t99.get((w, 1, "hungarian")),
+            t99.get((w, 3, "hungarian")),
+            t99.get((w, 3, "nearest")),
+        )
         if one and three:
             ratio_3_vs_1[w] = three / one
         if three and near:
             ratio_vs_nearest[w] = three / near
-        for n in (1, 3):
-            ref, ours = REFERENCE_T99_S.get((w, n)), d.get(f"{n}_hungarian")
-            if ref and ours:
-                vs_reference[f"{w}/{n}"] = ours / ref
     ious = [r["map_iou"] for r in rows if r["map_iou"] is not None]
     return {
         "runs": len(rows),
-        "success_rate": (sum(r["t99_s"] is not None for r in rows) / len(rows) if rows else None),
-        "t99_s": t99,
+        "success_rate": (sum(r.get("success", False) for r in rows) / len(rows) if rows else None),
+        "profiles": profiles,
         "t99_ratio_3_vs_1": ratio_3_vs_1,
         "t99_ratio_vs_nearest": ratio_vs_nearest,
-        "t99_ratio_vs_reference": vs_reference,
         "map_iou_min": min(ious) if ious else None,
+        "unexplored_reachable_m2_max": max(
+            (r["unexplored_reachable_m2"] for r in rows), default=None
+        ),
         "wall_collisions": sum(r["wall_collisions"] for r in rows),
         "crashed_runs": sum(bool(r["crashed_processes"]) for r in rows),
         "wall_time_s_max": {
@@ -184,23 +248,31 @@ def run(
     load_sim_s: float,
     on_run: Callable[[int, int, RunSpec, dict | None], None] | None = None,
     first_seed: int = 0,
+    profiles: tuple[str, ...] = ("thesis",),
 ) -> dict:
     out = out or Path(tempfile.mkdtemp(prefix="polyswarm-bench-explore-"))
-    runs = plan_runs(worlds, robots, seeds, nearest, first_seed)
-    rows = []
+    runs = [
+        spec
+        for prof in profiles
+        for spec in plan_runs(worlds, robots, seeds, nearest, first_seed, prof)
+    ]
+    rows, references = [], {}
     for k, spec in enumerate(runs):
         if on_run:
             on_run(k, len(runs), spec, None)
-        folder = out / f"{spec.world.replace(':', '_')}-{spec.robots}-{spec.strategy}-{spec.seed}"
+        key = (spec.profile, spec.world, spec.robots)
+        if spec.strategy == "hungarian" and key not in references:
+            references[key] = reference_t99(spec)
+        name = f"{spec.profile}-{spec.world.replace(':', '_')}-{spec.robots}-{spec.strategy}"
         t0 = time.monotonic()
-        row = run_exploration(spec, folder, speed, wall_limit_s)
+        row = run_exploration(spec, out / f"{name}-{spec.seed}", speed, wall_limit_s)
+        row["reference_t99_s"] = references.get(key)
         log.info("%s: t99 %s s in %.0f s wall", spec, row["t99_s"], time.monotonic() - t0)
         rows.append(row)
         if on_run:
             on_run(k, len(runs), spec, row)
-    res = summarise(rows)
+    res = summarise(rows, references)
     res["runs_detail"] = rows
-    res["reference_t99_s"] = {f"{w}/{n}": v for (w, n), v in REFERENCE_T99_S.items()}
     res["out"] = str(out)
     if load_robots > 0:
         load = coordinator_cycles(robots=load_robots, sim_s=load_sim_s)

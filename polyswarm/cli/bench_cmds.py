@@ -253,6 +253,9 @@ def bench_explore(
     first_seed: int = typer.Option(
         0, min=0, help="First seed (runs seeds FIRST_SEED .. FIRST_SEED + SEEDS - 1)."
     ),
+    profile: str = typer.Option(
+        "thesis", help="Robot profiles, comma separated (thesis, turtlebot3, turtlebot4, hokuyo)."
+    ),
     nearest: bool = typer.Option(
         True, help="Also run the nearest-frontier baseline (3 robots, maze and loop)."
     ),
@@ -264,26 +267,34 @@ def bench_explore(
     load_time: float = typer.Option(60.0, help="Simulated seconds of the load test."),
     out: Path = typer.Option(None, help="Folder of the runs (default: a temporary folder)."),
 ) -> None:
-    """Whole explorations (t99, success, IoU) and the coordinator cycle under load.
+    """Whole explorations (t99, success, IoU) against the idealised reference run for the
+    same world, robots and profile, and the coordinator cycle under load.
 
     The full default matrix takes many hours on 2 cores; pass --worlds/--seeds/--robots
-    for a subset."""
+    for a subset. The reference's runs are cached in runs/reference-cache/."""
     from rich.console import Console
 
     from polyswarm.benchmarks import explore as eb
+    from polyswarm.config import Config, with_profile
 
+    names = tuple(p for p in profile.split(",") if p)
+    for name in names:
+        with_profile(Config(), name)  # an unknown profile fails here, before any run
     console = Console(stderr=True)
     with console.status("explorations") as status:
 
         def on_run(k, n, spec, row) -> None:
-            what = f"{spec.world}, {spec.robots} robot(s), {spec.strategy}, seed {spec.seed}"
+            what = (
+                f"{spec.world}, {spec.profile}, {spec.robots} robot(s), {spec.strategy}, "
+                f"seed {spec.seed}"
+            )
             if row is None:
                 status.update(f"run {k + 1}/{n}: {what}")
             else:
                 t99 = "never" if row["t99_s"] is None else f"{row['t99_s']:.1f} s"
                 console.log(
-                    f"{what}: t99 {t99}, coverage {row['final_coverage']:.3f}, "
-                    f"wall {row['wall_time_s']:.0f} s"
+                    f"{what}: t99 {t99} (reference {row['reference_t99_s']} s), coverage "
+                    f"{row['final_coverage']:.3f}, wall {row['wall_time_s']:.0f} s"
                 )
 
         res = eb.run(
@@ -298,30 +309,39 @@ def bench_explore(
             load_time,
             on_run,
             first_seed,
+            names,
         )
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return
     from rich.table import Table
 
-    t = Table(title=f"Exploration, median t99 over {seeds} seed(s) (simulated s)")
-    for col in ("world", "robots/strategy", "t99 s", "reference s", "ratio"):
+    t = Table(title=f"Exploration, t99 over {seeds} seed(s) (simulated s)")
+    for col in ("profile", "world", "robots", "t99 median", "reference", "ratio", "worst ratio"):
         t.add_column(col, justify="right")
-    for w, d in res["t99_s"].items():
-        for key, v in d.items():
-            n = int(key.split("_")[0])
-            ref = eb.REFERENCE_T99_S.get((w, n)) if key.endswith("hungarian") else None
-            t.add_row(
-                w,
-                key.replace("_", " "),
-                "-" if v is None else f"{v:.0f}",
-                "-" if ref is None else f"{ref:.0f}",
-                "-" if (v is None or ref is None) else f"{v / ref:.2f}",
-            )
+    t.add_column("success", justify="right")
+
+    def num(v, fmt: str) -> str:
+        return "-" if v is None else format(v, fmt)
+
+    for prof, ws in res["profiles"].items():
+        for w, by_n in ws.items():
+            for n, d in by_n.items():
+                t.add_row(
+                    prof,
+                    w,
+                    n,
+                    num(d["t99_median_s"], ".0f"),
+                    num(d["reference_t99_s"], ".0f"),
+                    num(d["t99_ratio_vs_reference"], ".2f"),
+                    num(d["t99_ratio_vs_reference_worst"], ".2f"),
+                    f"{d['success_rate']:.2f}",
+                )
     Console().print(t)
     rows = [
-        ("success rate (runs reaching 99%)", f"{res['success_rate']:.2f}"),
-        ("map IoU, worst run", f"{res['map_iou_min']:.3f}" if res["map_iou_min"] else "-"),
+        ("success rate (99 %, no collision, no crash, IoU)", f"{res['success_rate']:.2f}"),
+        ("map IoU, worst run", num(res["map_iou_min"], ".3f")),
+        ("reachable area unexplored, worst run", num(res["unexplored_reachable_m2_max"], ".1f")),
         ("wall collisions (all runs)", str(res["wall_collisions"])),
         ("runs with a crashed process", str(res["crashed_runs"])),
     ]
