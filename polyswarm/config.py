@@ -249,7 +249,7 @@ class SlamConfig:
     # ... or sooner, when this share of a scan's beams end in unexplored space (a robot
     # passing a door sees a room a little differently at every step; keyframes every
     # 0.4 m left wedges of it unseen between their fans). 0: off
-    keyframe_novelty: float = num(0.1, 0.0, 1.0)
+    keyframe_novelty: float = num(0.0, 0.0, 1.0)
     frontier_range_m: float = positive(0.2, 100.0)  # dropouts become frontier points here
     # a beam with no return within the lidar's range crossed free space: it ends this far
     # out (Cartographer's missing_data_ray_length), or at NO_RETURN_SHARE of the range if

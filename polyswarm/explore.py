@@ -210,26 +210,26 @@ def assign(
 
 def target_groups(chains, goals: np.ndarray, separation_m: float) -> np.ndarray:
     """Group number per target: pieces of one frontier chain, and targets whose goals lie
-    within ``separation_m`` of each other (two robots sent through one door into one
-    room block each other there)."""
-    n = len(chains)
-    parent = list(range(n))
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    first: dict = {}
+    within ``separation_m`` of the first target of a group (two robots sent through one
+    door into one room block each other there). A group's targets lie within two
+    separations of each other: chaining neighbours to neighbours made one group of
+    every door along a corridor, and robots left whole rooms for a pillar's shadow."""
+    g = np.asarray(goals, dtype=float).reshape(-1, 2)
+    out = np.full(len(g), -1)
+    seeds: list[int] = []  # the first target of each group
+    by_chain: dict = {}
     for i, ch in enumerate(chains):
-        parent[find(i)] = find(first.setdefault(ch, i))
-    if separation_m > 0 and n > 1:
-        g = np.asarray(goals, dtype=float).reshape(-1, 2)
-        d = np.hypot(g[:, None, 0] - g[None, :, 0], g[:, None, 1] - g[None, :, 1])
-        for i, j in zip(*np.nonzero(np.triu(d < separation_m, 1)), strict=True):
-            parent[find(int(i))] = find(int(j))
-    return np.array([find(i) for i in range(n)])
+        if ch in by_chain:
+            out[i] = out[by_chain[ch]]
+            continue
+        near = [k for k in seeds if np.hypot(*(g[k] - g[i])) < separation_m]
+        if near:
+            out[i] = out[near[0]]
+        else:
+            out[i] = i
+            seeds.append(i)
+        by_chain[ch] = i
+    return out
 
 
 def _hungarian_grouped(c: np.ndarray, util: np.ndarray, groups: np.ndarray) -> list[int | None]:

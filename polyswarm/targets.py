@@ -90,6 +90,10 @@ GAIN_RADIUS_M = 6.0  # how far behind the frontier unexplored space is counted (
 GAIN_RAYS = 9  # rays over the half disc
 GAIN_STEPS = 6  # samples per ray (1 m apart)
 GAIN_WEIGHT = 1.0  # metres of path a square metre of that area is worth (0: length only)
+# a frontier's length counts in full where at least this much unexplored area lies behind
+# it, less in proportion below: the two sides of a furniture leg's shadow are long
+# frontiers around a sliver of unknown space that the next view from elsewhere fills
+LENGTH_GAIN_FULL_M2 = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,7 +187,9 @@ def frontier_targets(
             or np.hypot(*(black - seg.midpoint).T).min() < blacklist_radius_m
         ):
             continue
-        utility = min(seg.length_m, UTILITY_CAP_M) + GAIN_WEIGHT * gain
+        # a frontier's length counts in full only where there is space behind it to see
+        length = min(seg.length_m, UTILITY_CAP_M) * min(1.0, gain / LENGTH_GAIN_FULL_M2)
+        utility = length + GAIN_WEIGHT * gain
         out.append(Target(goal, seg, utility))
     out.sort(key=lambda t: -t.frontier.length_m)
     if separation_m > 0:
