@@ -5,6 +5,7 @@ rpe(est, ref, 1.0)                 relative pose error over 1 m of travel
 max_errors(est, ref)               largest translation / rotation error (same frame)
 map_iou(explored, truth)           intersection over union of free space
 wall_distance(starts, ends, walls) mean distance of obstacle vectors to true walls
+phantom_obstacles(...)             length of obstacle vectors far from every true wall
 time_to_coverage(curve, 0.99)      first time a coverage curve reaches a fraction (t99)
 """
 
@@ -91,6 +92,24 @@ def wall_distance(
     """Mean distance (m) from points every ``step_m`` along obstacle vectors to the walls."""
     if len(starts) == 0:
         return math.nan
+    dist, w = _distances_to_walls(starts, ends, wall_starts, wall_ends, step_m)
+    return float(np.sum(dist * w) / np.sum(w))
+
+
+def phantom_obstacles(
+    starts: np.ndarray, ends: np.ndarray, wall_starts, wall_ends, far_m: float, step_m=0.05
+) -> float:
+    """Length (m) of obstacle vectors farther than ``far_m`` from every true wall: walls
+    that are not there (another robot mapped as one, a ghost of a misaligned view)."""
+    if len(starts) == 0:
+        return 0.0
+    dist, w = _distances_to_walls(starts, ends, wall_starts, wall_ends, step_m)
+    return float(np.sum(w[dist > far_m]))
+
+
+def _distances_to_walls(starts, ends, wall_starts, wall_ends, step_m: float):
+    """Distances of points every ``step_m`` along the vectors to the nearest wall segment,
+    and the length each point stands for."""
     d = ends - starts
     L = np.hypot(d[:, 0], d[:, 1])
     n = np.maximum(1, np.ceil(L / step_m).astype(int))
@@ -101,8 +120,7 @@ def wall_distance(
     walls = shapely.STRtree(shapely.linestrings(np.stack([wall_starts, wall_ends], axis=1)))
     idx = walls.nearest(shapely.points(pts))
     dist = shapely.distance(shapely.points(pts), walls.geometries[idx])
-    w = np.repeat(L / n, n)  # weight by length represented
-    return float(np.sum(dist * w) / np.sum(w))
+    return dist, np.repeat(L / n, n)  # the length each point represents
 
 
 def time_to_coverage(curve, fraction: float) -> float | None:

@@ -130,3 +130,40 @@ def test_time_to_coverage_is_the_first_time_the_fraction_is_reached():
     assert time_to_coverage(curve, 0.99) == 40.0
     assert time_to_coverage(curve, 1.0) is None  # never reached
     assert time_to_coverage([], 0.5) is None
+
+
+def test_phantom_obstacles_are_the_length_of_walls_that_are_not_there():
+    from polyswarm.evaluation import phantom_obstacles, wall_distance
+
+    room = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=float)
+    ws, we = room, np.roll(room, -1, axis=0)
+    starts = np.array([[0.5, 0.01], [1.0, 1.0]])  # along the south wall; 1 m inside
+    ends = np.array([[2.5, 0.01], [2.5, 1.0]])
+    assert phantom_obstacles(starts, ends, ws, we, far_m=0.3) == pytest.approx(1.5)
+    assert phantom_obstacles(starts[:1], ends[:1], ws, we, far_m=0.3) == 0.0
+    # the mean wall distance weighs both by length: (2 x 0.01 + 1.5 x 1.0) / 3.5
+    assert wall_distance(starts, ends, ws, we) == pytest.approx((0.02 + 1.5) / 3.5)
+
+
+def test_reachable_free_space_is_what_the_footprint_sweeps_less_the_noise_band():
+    import shapely
+
+    from polyswarm.evaluation import coverage_tolerance, reachable_free
+
+    # a 4 x 4 m room, and through a 0.3 m gap a 1 x 1 m closet no 0.2 m robot enters
+    room = shapely.box(0, 0, 4, 4)
+    closet = shapely.box(4.2, 1.0, 5.2, 2.0)
+    gap = shapely.box(3.9, 1.35, 4.3, 1.65)
+    free = shapely.union_all([room, closet, gap])
+    swept = reachable_free(free, 0.2, [(1.0, 1.0, 0.0)])
+    # the room less the corners the disc cannot reach (r^2 - pi r^2 / 4 each); not the closet
+    corners = 4 * (0.2**2 - math.pi * 0.2**2 / 4)
+    assert swept.area == pytest.approx(16.0 - corners, abs=0.03)  # corners as 4-gons
+    assert not swept.intersects(closet)
+    tol = coverage_tolerance(0.01, 0.0175)  # two sigma of an LDS-01 at 2 m
+    assert tol == pytest.approx(2 * (0.01 + 0.0175 * 2.0))
+    assert reachable_free(free, 0.2, [(1.0, 1.0)], tol).area == pytest.approx(
+        (4 - 2 * tol) ** 2, rel=0.005
+    )
+    # a start nowhere near the free space: nothing is reachable
+    assert reachable_free(free, 0.2, [(10.0, 10.0)]).is_empty

@@ -242,7 +242,8 @@ def launch_cmd(
         cov = obs.coverage[-1][1] if obs.coverage else 0.0
         t = Table(
             title=(
-                f"{world}: {robots} robot(s), {strategy} | coverage {100 * cov:.1f} % | "
+                f"{world}: {robots} {opts.config.profile} robot(s), {strategy} | "
+                f"coverage {100 * cov:.1f} % | "
                 f"sim {obs.sim_t:.0f} s | wall {wall:.0f} s | {obs.mission}"
             )
         )
@@ -272,6 +273,7 @@ def launch_cmd(
 
     for k, v in (
         ("final coverage", f"{100 * m['final_coverage']:.1f} %"),
+        ("reachable area left unexplored", f"{m['unexplored_reachable_m2']:.1f} m2"),
         ("t90 / t99 (simulated)", f"{secs(m['t90_s'])} / {secs(m['t99_s'])}"),
         ("map IoU", f"{m['map_iou']:.3f}"),
         ("path length (all robots)", f"{m['total_path_length_m']:.0f} m"),

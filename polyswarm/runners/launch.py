@@ -34,8 +34,14 @@ import shapely
 from agents.session import Bus, SessionSpec, open_session
 from polyswarm.config import Config, RobotEntry, config_to_dict, save_config, with_overrides
 from polyswarm.errors import ConfigError, DecodeError, MapError, PolyswarmError
-from polyswarm.evaluation import coverage_tolerance, map_iou, reachable_free, time_to_coverage
-from polyswarm.polymap import GridPolyMap, MapDelta
+from polyswarm.evaluation import (
+    coverage_tolerance,
+    map_iou,
+    phantom_obstacles,
+    reachable_free,
+    time_to_coverage,
+)
+from polyswarm.polymap import GridPolyMap, MapDelta, VectorType
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta, decode_map
 from protocols.messages import (
@@ -59,6 +65,7 @@ RSS_EVERY_S = 5.0  # wall seconds between memory samples of the coordinator
 COVERAGE_EVERY_S = 1.0  # simulated seconds between coverage samples
 FINAL_FETCH_S = 2.0  # wall seconds to wait for the merged map at the end of a run
 START_TIMEOUT_S = 60.0  # wall seconds for all processes to come up
+PHANTOM_M = 0.3  # an obstacle vector this far from every true wall is no wall
 
 
 class FaultAction(StrEnum):
@@ -190,6 +197,10 @@ class Observer:
     def iou(self) -> float:
         return map_iou(self.merged.explored_region(), self.world.free)
 
+    def phantom_m(self) -> float:
+        st, en, _ = self.merged.vectors([VectorType.OBSTACLE])
+        return phantom_obstacles(st, en, *self.world.wall_segments, PHANTOM_M)
+
     def on_merged(self, delta: MapDelta) -> None:
         self.merged = self.merged.apply_delta(delta)
 
@@ -262,6 +273,9 @@ class Observer:
             "map_delta_bytes_per_robot": {k: v.map_delta_bytes for k, v in self.robots.items()},
             "keyframes_per_robot": {k: v.keyframes for k, v in self.robots.items()},
             "map_iou": self.iou(),
+            # walls in the map where there are none (a robot mapped as a wall, a ghost of a
+            # misaligned view): obstacle vectors farther than PHANTOM_M from any true wall
+            "phantom_obstacle_m": self.phantom_m(),
             "collisions": {"walls": self.collisions[0], "robots": self.collisions[1]},
             "coordinator_cycle_p95_ms": (
                 float(np.percentile(self.cycle_ms, 95)) if self.cycle_ms else None
@@ -490,6 +504,7 @@ def launch(
     m["crashed_processes"] = sorted(crashed)
     m["stopped_because"] = error or "unknown"
     m["config"] = config_to_dict(cfg)["explore"]
+    m["profile"] = cfg.profile
     _write_outputs(out, obs, m, cfg.map.whole_map_precision_m)
     return LaunchResult(out, m, obs.merged)
 
