@@ -130,7 +130,7 @@ class Behaviour:
         self._progress_t = 0.0
         self._blocked_since: float | None = None
         self._until = math.inf  # end of a recovery or a yield
-        self._recoveries: dict[int, int] = {}  # target -> recoveries for it
+        self._recoveries: dict[int, int] = {}  # target -> recoveries in this assignment
         self._trail: deque = deque(maxlen=TRAIL_POINTS)
         if self._turn_left <= 0:
             self.mode = Mode.IDLE
@@ -156,6 +156,7 @@ class Behaviour:
         log.info("%s: assignment %s %d at (%.1f, %.1f)", self.id, a.kind, a.target, *a.goal)
         self.follower.set_path(None)
         self._fail_since = None
+        self._recoveries.clear()  # counted per assignment: given again later, tried again
         if self.mode == Mode.START_TURN:
             return  # planned once the turn is done
         if a.kind == AssignmentKind.STOP:

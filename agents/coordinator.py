@@ -69,6 +69,9 @@ RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
 GOAL_RESET_M = 2.0  # ... and if this far, progress towards it is measured afresh
 STALLED_M = 1.0  # a robot that moved less than this while making no progress is stuck itself
+# ... which is weak evidence against its target: it counts this much of a failure (not
+# nothing: three robots wedged in turn at the same narrow way retried it for 2,000 s)
+STALLED_WEIGHT = 0.5
 REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave the map
 # no reachable target for this many cycles in a row (besides explore.end_confirm_s) ends
 # the mission: simulated seconds run faster than wall seconds, a loaded coordinator may
@@ -135,7 +138,7 @@ class Coordinator:
         # target ids differ from those of an earlier run of the coordinator (a restart):
         # robots must not take a new target for the one they already reached
         self._next_id = int(time.time() * 10) % 1_000_000_000
-        self.failures: dict[int, int] = {}
+        self.failures: dict[int, float] = {}
         self.looks: dict[int, int] = {}  # target id -> looks from its goal that left it open
         self.blacklist: list[np.ndarray] = []
         self.state = MissionState.STARTING
@@ -229,8 +232,16 @@ class Coordinator:
             else:
                 # no path on the map, or a robot that could not get on after recovering
                 # (agents.behaviour): it hands the target back, and is not sent there again
-                # for a while; repeated, the target is given up
-                self._failed(info, a.target, str(status.state))
+                # for a while; repeated, the target is given up. A robot that hardly moved
+                # since it last got closer is stuck itself (in clutter, or lost): that says
+                # nothing of the target
+                stalled = (
+                    status.state == RobotState.STUCK
+                    and info.pose is not None
+                    and info.progress_xy is not None
+                    and math.dist(info.progress_xy, info.pose[:2]) < STALLED_M
+                )
+                self._failed(info, a.target, str(status.state), STALLED_WEIGHT if stalled else 1.0)
         elif (
             status.state == RobotState.REACHED
             and a.kind == AssignmentKind.EXPLORE
@@ -541,7 +552,8 @@ class Coordinator:
                     r.progress_xy is not None and math.dist(r.progress_xy, r.pose[:2]) < STALLED_M
                 )
                 why = "robot stalled" if stalled else "no progress"
-                self._failed(r, a.target, f"{why} for {timeout:.0f} s", counts=not stalled)
+                weight = STALLED_WEIGHT if stalled else 1.0
+                self._failed(r, a.target, f"{why} for {timeout:.0f} s", weight)
 
     def _looked(self, r: RobotInfo) -> bool:
         """Has the robot looked at its reached target long enough, and has what it saw
@@ -569,17 +581,17 @@ class Coordinator:
         still = ~clear_of(pts, st, en, LOOK_MOVED_M)
         return bool(still.mean() >= LOOK_OPEN_SHARE)
 
-    def _failed(self, r: RobotInfo, tid: int, why: str, counts: bool = True) -> None:
-        """``counts``: the failure counts towards blacklisting the target."""
-        n = self.failures.get(tid, 0) + counts
+    def _failed(self, r: RobotInfo, tid: int, why: str, weight: float = 1.0) -> None:
+        """``weight``: how much of a failure this counts towards blacklisting the target."""
+        n = self.failures.get(tid, 0.0) + weight
         self.failures[tid] = n
-        log.info("target %d failed by %s (%s), %d time(s)", tid, r.id, why, n)
+        log.info("target %d failed by %s (%s), %.1f time(s)", tid, r.id, why, n)
         r.excluded[tid] = self.now + EXCLUDE_S
         r.best_cost, r.progress_t = math.inf, self.now
         r.assignment = None
         t = self.targets.get(tid)
-        if counts and t is not None and n >= self.cfg.explore.blacklist_after_failures:
-            self._blacklist(t, f"failed {n} times")
+        if t is not None and n >= self.cfg.explore.blacklist_after_failures:
+            self._blacklist(t, f"failed {n:.1f} times")
         self._wake = True
 
     def _blacklist(self, t: Target, why: str) -> None:

@@ -26,6 +26,7 @@ import numpy as np
 
 from agents import persist
 from agents.behaviour import Behaviour
+from agents.seen import SeenObstacles
 from polyswarm.config import Config
 from polyswarm.control import ControlParams, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
@@ -72,6 +73,8 @@ PEER_FRESH_S = 2.0
 PEER_MASK_M = 0.6
 SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
+NEAR_OBSTACLE_M = 0.5  # range at which the local controller's margin is judged
+MIN_SAFETY_MARGIN_M = 0.03
 
 
 @dataclass
@@ -94,6 +97,14 @@ class AgentStats:
     slam_ms: list[float] = field(default_factory=list)
 
 
+def safety_margin(lidar) -> float:
+    """How far beyond its radius the robot keeps from what its lidar sees: three sigma
+    of the range noise at ``NEAR_OBSTACLE_M`` (noisy returns of a wall it passes must
+    not stop it), at least the thesis sensor's 3 cm."""
+    sigma = lidar.noise_sigma_m + lidar.noise_sigma_per_m * NEAR_OBSTACLE_M
+    return max(MIN_SAFETY_MARGIN_M, 3.0 * sigma)
+
+
 class RobotAgent:
     def __init__(self, robot_id: str, cfg: Config, start_pose=(0.0, 0.0, 0.0)) -> None:
         self.id = check_name(robot_id, "robot id")
@@ -108,6 +119,7 @@ class RobotAgent:
         follower = PathFollower(
             ControlParams(
                 radius_m=cfg.nav.robot_radius_m,
+                safety_margin_m=safety_margin(lidar),
                 max_v_mps=rc.max_linear_mps,
                 max_w_radps=rc.max_angular_radps,
                 max_accel_mps2=rc.max_linear_accel_mps2,
@@ -117,6 +129,8 @@ class RobotAgent:
         )
         self.behaviour = Behaviour(self.id, follower, self, rc.max_angular_radps, lidar.fov_rad)
         self.merged: GridPolyMap | None = None
+        self.seen = SeenObstacles()  # obstacles the lidar sees and the planning map lacks
+        self._now_s = 0.0
         self.merged_graph: NavGraph | None = None
         self.own_graph: NavGraph | None = None
         self._own_graph_version = -1
@@ -202,7 +216,8 @@ class RobotAgent:
             return out
         motion = deskew_motion(scan, self.odometry.at_many)
         # 2. PolySLAM: pose, and on keyframes the map delta (other robots are not walls)
-        step = self.slam.process(self._without_peers(scan, stamp_s), odom, motion)
+        masked = self._without_peers(scan, stamp_s)
+        step = self.slam.process(masked, odom, motion)
         turned = abs(math.remainder(step.pose[2] - self.pose[2], 2 * math.pi))
         self.pose = step.pose
         if step.keyframe:
@@ -211,8 +226,11 @@ class RobotAgent:
         out.delta, out.op = step.delta, step.op
         # 3. behaviour: the command, following the path around what the scan sees (farther
         #    from what the map does not explain: other robots, people)
-        pts = scan_to_points(scan, self.cfg.slam.frontier_range_m, self._mount())
+        pts = scan_to_points(
+            scan, self.cfg.slam.frontier_range_m, self._mount(), motion=motion
+        )  # de-skewed too: a TurtleBot3 turning at 2.8 rad/s sweeps 0.57 rad per scan
         xy = pts.xy[pts.valid]
+        self._remember_unmapped(stamp_s, masked, motion)
         out.cmd = self.behaviour.step(stamp_s, self.pose, xy, self._unexplained(xy), turned)
         self.follower.sent(*out.cmd)  # arcs start from what the base does
         # 4. pose and state for the coordinator
@@ -248,6 +266,15 @@ class RobotAgent:
         self.stats.peer_returns_masked += int(hit.sum())
         return replace(scan, ranges=np.where(hit, np.nan, r))
 
+    def _remember_unmapped(self, stamp_s: float, scan: LaserScan, motion) -> None:
+        """Close returns (other robots left out) that the planning map does not hold:
+        the planner keeps clear of them (``agents.seen``)."""
+        self._now_s = stamp_s
+        pts = scan_to_points(scan, self.cfg.slam.frontier_range_m, self._mount(), motion=motion)
+        world = transform_points(self.pose, pts.xy[pts.valid])
+        pmap = self.merged if self.merged is not None else self.slam.map
+        self.seen.add(stamp_s, world, self.pose[:2], pmap)
+
     def _unexplained(self, xy_robot: np.ndarray) -> np.ndarray:
         """Scan points (robot frame) farther than ``UNEXPLAINED_M`` from every obstacle
         vector of the robot's own map: something that moves, or not mapped yet."""
@@ -279,7 +306,9 @@ class RobotAgent:
     def plan(self, start: np.ndarray, goal: np.ndarray, partial: bool):
         """A path on the merged map (the robot's own before it has one)."""
         pmap, graph = self._planning_map()
-        return Planner(pmap, graph).plan(start, goal, partial=partial)
+        return Planner(pmap, graph, self.seen.points(self._now_s)).plan(
+            start, goal, partial=partial
+        )
 
     def yield_point(self, xy: np.ndarray, other: np.ndarray) -> np.ndarray | None:
         """A free point about a metre from ``xy``, away from the other robot."""

@@ -72,9 +72,12 @@ class Path:
 
 
 class Planner:
-    def __init__(self, pmap: GridPolyMap, graph: NavGraph) -> None:
+    def __init__(self, pmap: GridPolyMap, graph: NavGraph, seen: np.ndarray | None = None) -> None:
+        """``seen``: (k, 2) points of obstacles the robot's lidar saw that the map does not
+        hold (a wall the merge lost, a door closed since): kept from as from walls."""
         self.map = pmap
         self.graph = graph
+        self.seen = np.zeros((0, 2)) if seen is None else np.asarray(seen, dtype=float)
         self.radius = graph.radius
         self.frontier_radius = graph.frontier_radius
 
@@ -214,7 +217,8 @@ class Planner:
             lines = shapely.linestrings(np.stack([st, en], axis=1))
             near = shapely.dwithin(sleeve, lines, grown_radius(r) + 1e-3)
             st, en, frontier = st[near], en[near], frontier[near]
-        free = shapely.difference(sleeve, self._grown(st, en, frontier, r), grid_size=1e-6)
+        seen = self._seen_near(sleeve, r)
+        free = shapely.difference(sleeve, self._grown(st, en, frontier, r, seen), grid_size=1e-6)
         # a tight passage on the route: its two pieces keep only the tight radius
         tight = {
             k
@@ -224,7 +228,7 @@ class Planner:
         }
         if tight:
             narrow = shapely.union_all([polys[k] for k in sorted(tight)], grid_size=1e-6)
-            grown = self._grown(st, en, frontier, self.graph.tight_radius)
+            grown = self._grown(st, en, frontier, self.graph.tight_radius, seen)
             free = shapely.union(
                 free, shapely.difference(narrow, grown, grid_size=1e-6), grid_size=1e-6
             )
@@ -247,9 +251,15 @@ class Planner:
             return _Sleeve(cut=_narrowest_openings(self.graph, nodes))
         return _Sleeve(path=_with_ends(tri_pts, start, s_eff, goal, g_eff))
 
-    def _grown(self, st, en, frontier, radius: float):
-        """Obstacle vectors grown by ``radius`` and frontier vectors by the frontier
-        radius, each by a circumscribed polygon (never closer than that)."""
+    def _seen_near(self, sleeve, r: float) -> np.ndarray:
+        if not len(self.seen):
+            return self.seen
+        near = shapely.dwithin(sleeve, shapely.points(self.seen), grown_radius(r) + 1e-3)
+        return self.seen[near]
+
+    def _grown(self, st, en, frontier, radius: float, seen=()):
+        """Obstacle vectors (and ``seen`` points) grown by ``radius`` and frontier vectors
+        by the frontier radius, each by a circumscribed polygon (never closer than that)."""
         parts = [
             shapely.buffer(
                 shapely.multilinestrings(np.stack([st[m], en[m]], axis=1)),
@@ -259,6 +269,12 @@ class Planner:
             for m, g in ((~frontier, radius), (frontier, self.frontier_radius))
             if m.any() and g > 0
         ]
+        if len(seen):
+            parts.append(
+                shapely.buffer(
+                    shapely.multipoints(seen), grown_radius(radius), quad_segs=BUFFER_SEGMENTS
+                )
+            )
         return shapely.union_all(parts) if parts else shapely.Polygon()
 
     def _towards(self, part, s_eff, start, goal) -> np.ndarray | None:

@@ -16,8 +16,9 @@ its dropouts so). Beams are classified before they become points:
   surface is there, so the beams are left out and the polygon joins their neighbours
   (an RPLIDAR's failed reading is +inf, the same as no return: read as free space it
   cut a spike through the wall);
-* **unknown**: anything else invalid (NaN from a +inf driver, a run below range_min)
-  becomes a point at the safe short range ``frontier_range_m`` (thesis 3.4).
+* **unknown**: anything else invalid (NaN from a +inf driver, a run between returns
+  within a few times the minimum range: something too close to measure) becomes a point
+  at the safe short range ``frontier_range_m`` (thesis 3.4).
 
 A spinning lidar takes its beams over the sweep (``LaserScan.time_increment``); with the
 robot's motion during it (``motion``), every point is moved into the robot frame at the
@@ -32,6 +33,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 NO_RETURN_RUN = 3  # beams: shorter runs of invalid beams between returns are dropouts
+# a run of invalid beams between returns closer than this many times the sensor's
+# minimum range is something too close to measure (a TurtleBot3 brushing a wall: the
+# LDS-01 reads below 0.12 m as 0.0, and taken as "no return" its beams cut 2.8 m of free
+# space through the wall; walls vanished and the furnished world ended at 81 %)
+NEAR_RUN_SHARE = 3.0
 # a no-return beam is trusted as free space to this share of the maximum range (the far
 # end of a sensor's range is where its misses are least certain)
 NO_RETURN_SHARE = 0.8
@@ -93,25 +99,32 @@ def classify(scan: LaserScan, out_of_range: str = "inf") -> tuple[np.ndarray, ..
     # the driver's own way of saying "no return" (which, for 0.0, is also a dropout)
     said = {"inf": np.isposinf(r), "nan": np.isnan(r), "zero": r == 0.0}[out_of_range] | far
     circular = scan.fov >= 2 * np.pi - 1.5 * abs(scan.angle_increment)
-    dropout = _short_gaps(~valid, NO_RETURN_RUN, circular)
-    return valid, said & ~dropout, dropout
+    dropout = np.zeros(len(r), dtype=bool)
+    near = np.zeros(len(r), dtype=bool)
+    near_m = NEAR_RUN_SHARE * max(scan.range_min, 0.05)
+    for run, left, right in _invalid_runs(~valid, circular):
+        if left is None or right is None:
+            continue
+        if len(run) < NO_RETURN_RUN:
+            dropout[run] = True
+        elif r[left] < near_m and r[right] < near_m:
+            near[run] = True  # something closer than the sensor measures: not free space
+    return valid, said & ~dropout & ~near, dropout
 
 
-def _short_gaps(invalid: np.ndarray, run: int, circular: bool) -> np.ndarray:
-    """Runs of True shorter than ``run`` with a False on both sides (around the end of a
-    full circle too)."""
+def _invalid_runs(invalid: np.ndarray, circular: bool):
+    """Each run of invalid beams (indices) with the valid beam before and after it (None
+    at the ends of a partial field of view; around the seam of a full circle)."""
     n = len(invalid)
-    out = np.zeros(n, dtype=bool)
     if n == 0 or invalid.all() or not invalid.any():
-        return out
+        return
     shift = int(np.argmin(invalid)) if circular else 0  # a circle starts on a return
     m = np.roll(invalid, -shift)
     edges = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
     for a, b in zip(np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0], strict=True):
-        bounded = circular or (a > 0 and b < n)
-        if bounded and b - a < run:
-            out[a:b] = True
-    return np.roll(out, shift)
+        left = (a - 1 + shift) % n if (circular or a > 0) else None
+        right = (b + shift) % n if (circular or b < n) else None
+        yield (np.arange(a, b) + shift) % n, left, right
 
 
 def scan_to_points(

@@ -43,7 +43,10 @@ from sim.shapes import WALL_HEIGHT_M, World
 log = logging.getLogger(__name__)
 
 ROBOT_HEIGHT_M = 0.4  # body height; the lidar rays run at cfg.lidar.height_m
-RAY_START_OFFSET_M = 0.01  # rays start this far outside the robot's own body
+# rays start at the lidar (the robot's centre): robots have no bodies among the walls, so
+# nothing of its own is in the way. (Rays that started outside the body went through a
+# wall the robot brushed, and returned from beyond it.)
+RAY_START_M = 0.0
 # Robots have no collision body among the walls: in pybullet's ray test every convex
 # body costs about 1 ms per 720-beam scan, even with collision filters (measured). The
 # lidar sees robots as circles, added analytically (exact for cylinders); wall contacts
@@ -380,7 +383,7 @@ class Simulation:
         """True ranges (inf: nothing within range) of the given beams of each robot in
         ``which``, each beam from the robot's pose at ``frac`` of the last step."""
         lid = self.cfg.lidar
-        r0 = self.cfg.robot.radius_m + RAY_START_OFFSET_M
+        r0 = RAY_START_M
         frm, to, rays = [], [], []
         for k in which:
             a, b = self._prev[k], self.robots[k].pose

@@ -102,3 +102,8 @@ def test_a_robot_that_cannot_get_on_backs_off_along_its_trail_then_hands_its_tar
     # a new target: it drives again
     b.on_assignment(Assignment(AssignmentKind.EXPLORE, 10, (0.0, 2.0), ()), 200.0, pose)
     assert b.mode == Mode.NAVIGATE
+    # the same target given again later (after a stop): tried again, with its recoveries
+    b.on_assignment(Assignment(AssignmentKind.STOP, -1, (0.0, 0.0), ()), 210.0, pose)
+    b.on_assignment(goal, 220.0, pose)
+    _, seen = drive(b, pose, 20.0, wall_x=2.5, t0=220.0)
+    assert Mode.RECOVER in [m for _, _, m in seen]

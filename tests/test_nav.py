@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -236,3 +237,20 @@ def test_frontiers_keep_the_frontier_radius_only():
     assert path_clearance(path.points, *obstacles(pmap)) >= 0.3 - 1e-6
     fs, fe, _ = pmap.vectors([F])
     assert path_clearance(path.points, fs, fe) >= 0.1 - 1e-6
+
+
+def test_seen_obstacles_the_map_lacks_are_kept_clear_of_like_walls():
+    """A wall the map lost (free space on both sides merged through it) but the lidar
+    sees: the path goes round its end, the radius away from every seen point."""
+    ring = Ring([(0, 0), (8, 0), (8, 4), (0, 4)], [O] * 4)
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(ring)).map
+    graph = NavGraph.build(pmap, R)
+    straight = Planner(pmap, graph).plan((1, 1), (7, 1))
+    assert straight.length_m == pytest.approx(6.0, abs=1e-6)
+    wall = np.stack([np.full(61, 4.0), np.linspace(0.0, 3.0, 61)], axis=1)  # x = 4, y 0-3
+    around = Planner(pmap, graph, seen=wall).plan((1, 1), (7, 1))
+    pts = around.points
+    assert pts[:, 1].max() >= 3.0 + R - 1e-6  # over the wall's end at y = 3
+    dense = np.concatenate([np.linspace(a, b, 50) for a, b in itertools.pairwise(pts)])
+    gap = np.min(np.hypot(*(dense[:, None, :] - wall[None, :, :]).transpose(2, 0, 1)))
+    assert gap >= R - 1e-6
