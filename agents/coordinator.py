@@ -28,6 +28,7 @@ import logging
 import math
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -156,6 +157,11 @@ class Coordinator:
         self.bytes_sent = 0
         self.replayed_merges = 0  # robot merges replayed on their map copies
         self.replay_cpu_ms: list[float] = []  # this thread's processor time of each replay
+        # wall milliseconds of all the work in the coordinator's thread, by stage: replays
+        # of robots' merges, cell deltas, full maps, blocking map fetches, merging into the
+        # merged map, the cycle's planning, journaling and publishing. All of it counts
+        # into the next cycle's time (``cycle_ms``): it delays the cycle as much
+        self.stage_ms: dict[str, float] = {}
         self.applied_deltas = 0  # robot cell deltas applied to them
         self.map_fetches = 0  # robot maps fetched whole (a gap, or a merge that differed)
 
@@ -263,7 +269,8 @@ class Coordinator:
             if delta.base_version > 0:
                 raise _gap(rid, delta)
             info.map = GridPolyMap(delta.cell_size)
-        info.map = info.map.apply_delta(delta)
+        with self.timed("deltas"):
+            info.map = info.map.apply_delta(delta)
         self.applied_deltas += 1
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(c.index for c in delta.cells)
@@ -280,7 +287,8 @@ class Coordinator:
                 raise DeltaGapError(f"first merge of {rid} starts at version {op.base_version}")
             info.map = GridPolyMap(op.cell_size)
         c0 = time.thread_time()
-        res = info.map.replay(op)
+        with self.timed("replay"):
+            res = info.map.replay(op)
         self.replay_cpu_ms.append((time.thread_time() - c0) * 1e3)
         if not res.changed:
             return None
@@ -324,9 +332,28 @@ class Coordinator:
             delta = self.merged.delta_since(base)
             self.graph.update(self.merged, {c.index for c in delta.cells})
             self._index = None
-        self._pending_ms += (time.perf_counter() - t0) * 1e3
-        self._pending_cpu_ms += (time.thread_time() - c0) * 1e3
+        self.spent("merge", (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
         return delta
+
+    def spent(self, stage: str, wall_ms: float, cpu_ms: float) -> None:
+        """Work done in the coordinator's thread: counted into the next cycle's time."""
+        self._pending_ms += wall_ms
+        self._pending_cpu_ms += cpu_ms
+        self.stage_ms[stage] = self.stage_ms.get(stage, 0.0) + wall_ms
+
+    @contextmanager
+    def timed(self, stage: str):
+        """``with coord.timed("fetch"): ...`` counts the block as work of ``stage``."""
+        t0, c0 = time.perf_counter(), time.thread_time()
+        try:
+            yield
+        finally:
+            self.spent(stage, (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
+
+    def stage_shares(self) -> dict[str, float]:
+        """Each stage's share of all the work counted into cycles."""
+        total = sum(self.stage_ms.values())
+        return {k: v / total for k, v in sorted(self.stage_ms.items())} if total else {}
 
     def _merge_batch(self, cells: list) -> None:
         try:
@@ -409,8 +436,8 @@ class Coordinator:
                 out.assignments[r.id] = r.assignment
         for rid in out.assignments:
             self.robots[rid].sent_t = self.now
-        ms = (time.perf_counter() - t0) * 1e3 + self._pending_ms
-        cpu_ms = (time.thread_time() - c0) * 1e3 + self._pending_cpu_ms
+        self.spent("plan", (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
+        ms, cpu_ms = self._pending_ms, self._pending_cpu_ms
         self._pending_ms = self._pending_cpu_ms = 0.0
         self.cycle_ms.append(ms)
         self.cycle_cpu_ms.append(cpu_ms)
@@ -690,21 +717,26 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                             try:
                                 wire = item.payload
                                 if msg.kind == MapKind.MERGE:
-                                    op = decode_merge(wire)
+                                    with coord.timed("decode"):
+                                        op = decode_merge(wire)
                                     replayed = coord.on_robot_merge(rid, item.stamp_s, op)
                                     # journaled as the cells it changed (restores need no merge)
                                     wire = None
                                     if replayed is not None and journal is not None:
-                                        wire = encode_delta(replayed)
+                                        with coord.timed("journal"):
+                                            wire = encode_delta(replayed)
                                 else:
-                                    coord.on_robot_delta(rid, item.stamp_s, decode_delta(wire))
+                                    with coord.timed("decode"):
+                                        delta = decode_delta(wire)
+                                    coord.on_robot_delta(rid, item.stamp_s, delta)
                             except MapError as e:
                                 log.info("resync of %s: %s", rid, e)
                                 resync.add(rid)
                             else:
                                 if wire is not None:
                                     copy = coord.robot(rid).map
-                                    _journal(journal, "robot_delta", rid, wire, copy)
+                                    with coord.timed("journal"):
+                                        _journal(journal, "robot_delta", rid, wire, copy)
                     except DecodeError as e:
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
@@ -713,27 +745,33 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 for rid in list(resync):
                     log.info("fetching the full map of %s", rid)
                     coord.map_fetches += 1
-                    got = bus.fetch_map(keys.robot(rid).map, timeout_s=2.0)
+                    with coord.timed("fetch"):  # blocking: it delays the cycle
+                        got = bus.fetch_map(keys.robot(rid).map, timeout_s=2.0)
                     coord.robot(rid).behind_since = coord.now  # next try after a pause
                     if got is None:
                         continue
                     try:
                         before = coord.robot(rid).map
-                        coord.on_robot_map(rid, decode_any_map(got[0]))
+                        with coord.timed("fetch"):
+                            coord.on_robot_map(rid, decode_any_map(got[0]))
                         resync.discard(rid)
                         if coord.robot(rid).map is not before:
-                            _journal(journal, "robot_map", rid, coord.robot(rid).map)
+                            with coord.timed("journal"):
+                                _journal(journal, "robot_map", rid, coord.robot(rid).map)
                     except PolyswarmError as e:
                         log.warning("map of %s refused: %s", rid, e)
                 if coord.flush_due():
-                    _publish_delta(bus, keys, coord, coord.flush(), journal)
+                    delta = coord.flush()
+                    with coord.timed("publish"):
+                        _publish_delta(bus, keys, coord, delta, journal)
                 if coord.due():
                     out = coord.cycle()
-                    _publish_delta(bus, keys, coord, out.merged_delta, journal)
-                    for rid, a in out.assignments.items():
-                        coord.bytes_sent += bus.publish(
-                            keys.assignment(rid), a, coord.now, reliable=True
-                        )
+                    with coord.timed("publish"):  # counted into the next cycle
+                        _publish_delta(bus, keys, coord, out.merged_delta, journal)
+                        for rid, a in out.assignments.items():
+                            coord.bytes_sent += bus.publish(
+                                keys.assignment(rid), a, coord.now, reliable=True
+                            )
                     if out.status is not None:
                         coord.bytes_sent += bus.publish(
                             keys.coordinator_status, out.status, coord.now, reliable=True
@@ -746,6 +784,11 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 coord.applied_deltas,
                 coord.map_fetches,
             )
+            if coord.stage_ms:
+                log.info(
+                    "coordinator thread's work by stage: %s",
+                    ", ".join(f"{k} {v:.0%}" for k, v in coord.stage_shares().items()),
+                )
             if coord.replay_cpu_ms:
                 r = np.asarray(coord.replay_cpu_ms)
                 log.info(

@@ -1,11 +1,15 @@
-"""A standard log-odds occupancy-grid mapper: the map a ROS user would share.
+"""The occupancy grid a ROS user would share, built as gmapping builds it.
 
 The baseline of the bandwidth comparison: the same scans and poses that PolySLAM used go
-into a 5 cm grid by ray casting (free along each beam, occupied at its end), and the
-grid is published as nav_msgs/OccupancyGrid (-1 unknown, 0 free, 100 occupied) or as
-map_msgs/OccupancyGridUpdate bounding-box deltas.
+into a 5 cm grid by ray casting, and the grid is published as nav_msgs/OccupancyGrid
+(-1 unknown, 0 free, 100 occupied) or as map_msgs/OccupancyGridUpdate bounding-box
+deltas. Cells count as gmapping's do (``GMapping::PointAccumulator``): every beam that
+passes a cell is a visit, every beam that ends in it a hit and a visit; slam_gmapping
+publishes a cell never visited as -1, as 100 when hits / visits exceed ``~occ_thresh``
+(default 0.25), else as 0. So one pass makes a cell free (a log-odds grid with -0.4 per
+miss against map_server's free threshold needed four).
 
-    g = LogOddsGrid(bounds=(x0, y0, x1, y1), resolution_m=0.05)
+    g = CountingGrid(bounds=(x0, y0, x1, y1), resolution_m=0.05)
     g.integrate(scan, pose)
     box = g.changes()          # trinary cells changed since the last call: (row0, col0, data)
 """
@@ -21,13 +25,8 @@ from polyswarm.errors import MapError
 from polyswarm.occupancy import FREE, OCCUPIED, UNKNOWN
 from polyswarm.scan import LaserScan
 
-# log-odds increments and limits (the usual values of gmapping / Thrun et al.)
-L_OCC = 0.85  # a beam end: p = 0.7
-L_FREE = -0.4  # a cell a beam passes: p = 0.4
-L_MIN, L_MAX = -2.0, 3.5  # clamping keeps the grid responsive
-L_OCC_THRESH = math.log(0.65 / 0.35)  # occupied above p = 0.65 (map_server default)
-L_FREE_THRESH = math.log(0.196 / 0.804)  # free below p = 0.196 (map_server default)
-MAX_GRID_CELLS = 64_000_000  # a grid larger than this (256 MB of float32) is refused
+OCC_THRESH = 0.25  # slam_gmapping's ~occ_thresh default: occupied above this hit share
+MAX_GRID_CELLS = 64_000_000  # a grid larger than this (512 MB of two int32 counts) is refused
 
 
 @dataclass(frozen=True)
@@ -39,7 +38,7 @@ class GridBox:
     data: np.ndarray  # (rows, cols) int8
 
 
-class LogOddsGrid:
+class CountingGrid:
     def __init__(
         self,
         bounds: tuple[float, float, float, float],
@@ -53,13 +52,18 @@ class LogOddsGrid:
         rows = math.ceil((y1 - self.origin[1]) / self.res) + 1
         if rows * cols > MAX_GRID_CELLS or rows <= 0 or cols <= 0:
             raise MapError(f"grid of {rows} x {cols} cells refused")
-        self.logodds = np.zeros((rows, cols), dtype=np.float32)
+        self.hits = np.zeros((rows, cols), dtype=np.int32)
+        self.visits = np.zeros((rows, cols), dtype=np.int32)
         self.free_range_m = free_range_m  # beams with no return clear this far
         self._published = np.full((rows, cols), UNKNOWN, dtype=np.int8)
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.logodds.shape
+        return self.hits.shape
+
+    @property
+    def size(self) -> int:
+        return self.hits.size
 
     def integrate(self, scan: LaserScan, pose, mount=(0.0, 0.0, 0.0)) -> None:
         """Ray-cast one scan taken at robot ``pose`` (x, y, theta) into the grid."""
@@ -74,20 +78,21 @@ class LogOddsGrid:
         length = np.where(hit, r, np.where(miss, self.free_range_m, 0.0))
         keep = length > 0
         a, length, hit = a[keep], length[keep], hit[keep]
-        # free cells: samples every half cell along each beam, short of its end
+        # passed cells: samples every half cell along each beam, short of its end
         step = 0.5 * self.res
         n = np.ceil(length / step).astype(int)
         beam = np.repeat(np.arange(len(a)), n)
         offs = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
         d = offs * step
-        inside = d < length[beam] - self.res  # the end cell is not cleared
+        inside = d < length[beam] - 0.5 * self.res  # up to the end cell (the hit)
         beam, d = beam[inside], d[inside]
-        free = self._cells(sx + d * np.cos(a[beam]), sy + d * np.sin(a[beam]))
+        passed = self._cells(sx + d * np.cos(a[beam]), sy + d * np.sin(a[beam]))
         ends = self._cells(sx + length[hit] * np.cos(a[hit]), sy + length[hit] * np.sin(a[hit]))
-        lo = self.logodds.reshape(-1)
-        free = np.setdiff1d(free, ends)  # a cell hit in this scan is not also cleared
-        lo[free] = np.maximum(lo[free] + L_FREE, L_MIN)
-        lo[ends] = np.minimum(lo[ends] + L_OCC, L_MAX)
+        passed = np.setdiff1d(passed, ends)  # a cell hit in this scan is not also passed
+        v, h = self.visits.reshape(-1), self.hits.reshape(-1)
+        v[passed] += 1
+        v[ends] += 1
+        h[ends] += 1
 
     def _cells(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
         rows, cols = self.shape
@@ -99,8 +104,10 @@ class LogOddsGrid:
     def trinary(self) -> np.ndarray:
         """The grid as published: -1 unknown, 0 free, 100 occupied (row 0 = lowest y)."""
         out = np.full(self.shape, UNKNOWN, dtype=np.int8)
-        out[self.logodds < L_FREE_THRESH] = FREE
-        out[self.logodds > L_OCC_THRESH] = OCCUPIED
+        seen = self.visits > 0
+        occupied = self.hits > OCC_THRESH * self.visits
+        out[seen & ~occupied] = FREE
+        out[seen & occupied] = OCCUPIED
         return out
 
     def changes(self) -> GridBox | None:

@@ -405,3 +405,24 @@ def test_a_wall_chord_of_one_robot_closes_on_another_robots_wall():
     s, e, _ = c.merged.vectors([VectorType.FRONTIER])
     assert np.hypot(*(e - s).T).sum() == pytest.approx(0.0, abs=1e-6)
     assert c.merged.explored_area() == pytest.approx(3.8 * 1.42)  # nothing lost
+
+
+def test_a_cycle_counts_all_the_work_done_in_the_coordinators_thread_since_the_last():
+    """Applying a robot's cells and merging them happen between cycles: the next cycle's
+    time includes them, and the stages add up to everything counted."""
+    c = coordinator(1)
+    feed(c, "r1", corridor_map(open_end=True), 0.1)
+    c.now = 1.0
+    c.cycle()
+    assert {"deltas", "merge", "plan"} <= set(c.stage_ms)
+    assert c.cycle_ms[-1] == pytest.approx(sum(c.stage_ms.values()), rel=1e-9)
+    assert sum(c.stage_shares().values()) == pytest.approx(1.0)
+    # a cycle with nothing received since: planning only
+    before = dict(c.stage_ms)
+    c.now = 2.0
+    c.cycle()
+    grew = {k for k in c.stage_ms if c.stage_ms[k] > before.get(k, 0.0)}
+    assert grew <= {"plan", "merge"}
+    assert c.cycle_ms[-1] == pytest.approx(
+        sum(c.stage_ms[k] - before.get(k, 0.0) for k in c.stage_ms), rel=1e-9
+    )

@@ -217,7 +217,8 @@ def coordinator_cycles(
     world_name: str = "data:maze", robots: int = 10, sim_s: float = 60.0, seed: int = 0
 ) -> dict:
     """Explore ``world_name`` with ``robots`` robots in one process; the coordinator's
-    cycle times (ms) including the merges since the previous cycle."""
+    cycle times (ms) including all the work in its thread since the previous cycle
+    (replaying robots' merges, merging, planning), and each stage's share of it."""
     from polyswarm.benchmarks.inproc import explore_in_process
 
     run = explore_in_process(world_name, robots, sim_s, seed)
@@ -233,6 +234,7 @@ def coordinator_cycles(
         "merged_cells": len(run.coordinator.merged.cells),
         "explored_m2": run.coordinator.merged.explored_area(),
         "robot_delta_bytes": run.delta_bytes,
+        "stage_share": run.coordinator.stage_shares(),
     }
 
 

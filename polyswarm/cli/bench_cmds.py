@@ -32,7 +32,8 @@ def bench_format(
     as_json: bool = JSON_OPT,
     cell_size: float = typer.Option(2.0, help="Cell size, metres."),
 ) -> None:
-    """PolyMap bytes against PNG/zlib of the same 5 cm grid; merge latency."""
+    """PolyMap bytes against PNG/zlib of the same 5 cm grid, the PNG at the map's own
+    resolution, and a 5 cm grid built from noisy scans along a route; merge latency."""
     from rich.console import Console
     from rich.table import Table
 
@@ -56,6 +57,8 @@ def bench_format(
         "PNG",
         "grid zlib",
         "bytes/PNG",
+        "bytes/native PNG",
+        "route: bytes/PNG",
         "free kept",
         "occ kept",
     ):
@@ -70,6 +73,8 @@ def bench_format(
             str(w["grid_png_bytes"]),
             str(w["grid_zlib_bytes"]),
             f"{w['encoded_bytes'] / w['grid_png_bytes']:.2f}",
+            f"{w['bytes_ratio_vs_native_png']:.2f}",
+            f"{w['route_bytes_ratio_vs_png']:.2f}",
             f"{w['round_trip_free_kept']:.4f}",
             f"{w['round_trip_occupied_kept']:.4f}",
         )
@@ -411,6 +416,7 @@ def bench_bandwidth(
     t.add_column("run")
     for s in bw.SCHEMES:
         t.add_column(s.replace("_", " "), justify="right")
+    t.add_column("PolyMap / best baseline", justify="right")
     t.add_column("PolyMap / best grid delta", justify="right")
     t.add_column("map / PNG", justify="right")
     for r in results:
@@ -418,6 +424,7 @@ def bench_bandwidth(
         t.add_row(
             r["name"],
             *[bw.fmt_bytes(c[s]) for s in bw.SCHEMES],
+            f"{r['delta_bytes_ratio_vs_best_baseline']:.3f} ({r['best_baseline']})",
             f"{r['delta_bytes_ratio_vs_best_grid']:.3f}",
             f"{r['map_bytes_ratio_vs_png']:.2f}",
         )
