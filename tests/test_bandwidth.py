@@ -92,6 +92,7 @@ def test_measure_adds_up_every_scheme_and_picks_the_smallest_baseline():
     best = min(bw.BASELINE_SCHEMES, key=lambda s: c[s])
     assert res["best_baseline"] == best
     assert res["delta_bytes_ratio_vs_best_baseline"] == pytest.approx(800 / c[best])
+    assert res["delta_bytes_ratio_vs_keyframe_scans"] == pytest.approx(800 / scans)
     assert res["best_grid_delta_scheme"] in bw.GRID_DELTA_SCHEMES
     # the first update carries everything seen; a zlib'd full grid is never smaller
     assert c["grid_full_zlib"] >= c["grid_update_zlib"] > 0

@@ -260,6 +260,9 @@ def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) 
         "best_grid_delta_scheme": best_grid,
         "best_baseline": best,
         "delta_bytes_ratio_vs_best_baseline": cumulative["polymap_delta"] / cumulative[best],
+        "delta_bytes_ratio_vs_keyframe_scans": (
+            cumulative["polymap_delta"] / cumulative["keyframe_scans"]
+        ),
         "delta_bytes_ratio_vs_best_grid": cumulative["polymap_delta"] / cumulative[best_grid],
         "delta_zlib_bytes_ratio_vs_best_grid": (
             cumulative["polymap_delta_zlib"] / cumulative[best_grid]
@@ -364,6 +367,9 @@ def summary(results: list[dict]) -> dict:
             r["delta_bytes_ratio_vs_best_baseline"] for r in results
         ),
         "delta_bytes_ratio_vs_best_grid": max(r["delta_bytes_ratio_vs_best_grid"] for r in results),
+        "delta_bytes_ratio_vs_keyframe_scans": max(
+            r["delta_bytes_ratio_vs_keyframe_scans"] for r in results
+        ),
         "map_bytes_ratio_vs_png": max(r["map_bytes_ratio_vs_png"] for r in results),
         "cumulative_bytes": {r["name"]: r["cumulative_bytes"] for r in results},
         "runs": {r["name"]: {k: v for k, v in r.items() if k != "rows"} for r in results},

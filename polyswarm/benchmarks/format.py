@@ -49,6 +49,7 @@ def world_sizes(name: str, cell_size: float) -> dict:
         "encoded_bytes": len(enc),
         "encoded_zlib_bytes": len(zlib.compress(enc, 9)),
         "grid_png_bytes": len(grid_png_bytes(grid)),
+        "bytes_ratio_vs_png": len(enc) / len(grid_png_bytes(grid)),
         # the same map as a PNG at its own resolution (0.2 m for the thesis worlds)
         "native_resolution_m": src.resolution,
         "native_png_bytes": len(grid_png_bytes(src)),

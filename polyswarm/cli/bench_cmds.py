@@ -10,6 +10,20 @@ import typer
 from polyswarm.cli import app, bench_app
 
 JSON_OPT = typer.Option(False, "--json", help="Print JSON instead of a table.")
+SAVE_OPT = typer.Option(
+    None,
+    "--save",
+    metavar="NAME",
+    help="Also write the result to docs/results/NAME.json, with the code version, the "
+    "processor, the date and the command.",
+)
+
+
+def _save(name: str | None, result: dict) -> None:
+    if name:
+        from polyswarm.benchmarks.results import save
+
+        typer.echo(f"wrote {save(name, result)}", err=True)
 
 
 def _emit(result: dict, as_json: bool, title: str, rows: list[tuple[str, str]]) -> None:
@@ -30,6 +44,7 @@ def _emit(result: dict, as_json: bool, title: str, rows: list[tuple[str, str]]) 
 @bench_app.command("format")
 def bench_format(
     as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
     cell_size: float = typer.Option(2.0, help="Cell size, metres."),
 ) -> None:
     """PolyMap bytes against PNG/zlib of the same 5 cm grid, the PNG at the map's own
@@ -42,6 +57,7 @@ def bench_format(
     console = Console(stderr=True)
     with console.status("converting worlds and merging keyframes"):
         res = fmt.run(cell_size)
+    _save(save, res)
     if as_json:
         typer.echo(json.dumps(res, indent=2))
         return
@@ -99,6 +115,7 @@ def bench_format(
 @bench_app.command("sim")
 def bench_sim(
     as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
     world: str = typer.Option("data:maze", help="World to step (default: the largest)."),
 ) -> None:
     """Lidar scans per second, real-time factor against ray casting alone, memory."""
@@ -108,6 +125,7 @@ def bench_sim(
 
     with Console(stderr=True).status(f"stepping {world}"):
         res = simbench.run(world)
+    _save(save, res)
     rows = [(f"scans/s, {n} robot(s)", f"{v:.0f}") for n, v in res["scans_per_s"].items()]
     rows += [
         ("real-time factor, 3 robots", f"{res['real_time_factor_3_robots']:.1f}"),
@@ -125,6 +143,7 @@ def bench_sim(
 @bench_app.command("slam")
 def bench_slam(
     as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
     worlds: str = typer.Option("loop,cross,zigzag,maze", help="Thesis worlds to drive through."),
     log_seeds: int = typer.Option(
         1, min=1, help="Odometry-noise seeds per log (0..N-1); ATE median and max over them."
@@ -142,6 +161,7 @@ def bench_slam(
             tuple(w for w in worlds.split(",") if w),
             log_seeds,
         )
+    _save(save, res)
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return
@@ -185,16 +205,19 @@ def bench_slam(
 @bench_app.command("nav")
 def bench_nav(
     as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
     pairs: int = typer.Option(50, min=1, help="Random start/goal pairs per map."),
     seed: int = typer.Option(0, help="Seed of the start/goal draw and the PolySLAM run."),
 ) -> None:
-    """Navigation graph and planner against 8-connected A* on the inflated 5 cm grid."""
+    """Navigation graph and planner against shortest paths on the inflated grid: scikit-image's
+    compiled planner at 5 cm and at the map's own resolution, and a Python A*."""
     from rich.console import Console
 
     from polyswarm.benchmarks import nav as navbench
 
     with Console(stderr=True).status("navigation") as status:
         res = navbench.run(pairs, seed, lambda what: status.update(f"navigation: {what}"))
+    _save(save, res)
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return
@@ -212,6 +235,10 @@ def bench_nav(
         "plan ms",
         "grid A* ms",
         "speed-up",
+        "compiled 5 cm ms",
+        "speed-up",
+        "compiled native ms",
+        "speed-up",
         "min clearance",
     ):
         t.add_column(col, justify="right")
@@ -226,6 +253,12 @@ def bench_nav(
             f"{m['planning_ms_median']:.1f}",
             f"{m['grid_astar_ms_median']:.0f}",
             f"{m['planning_speedup_median']:.0f} x",
+            f"{m['grid_mcp_ms_median']:.1f}",
+            f"{m['speedup_vs_compiled_median']:.1f} x",
+            "-" if m["native_mcp_ms_median"] is None else f"{m['native_mcp_ms_median']:.1f}",
+            "-"
+            if m["speedup_vs_native_compiled_median"] is None
+            else f"{m['speedup_vs_native_compiled_median']:.2f} x",
             f"{m['min_clearance_to_walls_m']:.3f} m",
         )
     Console().print(t)
@@ -238,6 +271,10 @@ def bench_nav(
             ("path length / grid path (median)", f"{res['path_length_ratio_median']:.3f}"),
             ("planning speed-up (median)", f"{res['planning_speedup_median']:.0f} x"),
             (
+                "... against the compiled grid planner (median)",
+                f"{res['speedup_vs_compiled_median']:.1f} x",
+            ),
+            (
                 "graph update p50 / p95",
                 f"{res['update_p50_ms']:.1f} / {res['update_p95_ms']:.1f} ms",
             ),
@@ -249,6 +286,7 @@ def bench_nav(
 @bench_app.command("explore")
 def bench_explore(
     as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
     worlds: str = typer.Option(
         "data:loop,data:cross,data:maze,data:zigzag,office,rooms",
         help="Worlds, comma separated (data:NAME, procedural names or .yaml paths).",
@@ -316,6 +354,7 @@ def bench_explore(
             first_seed,
             names,
         )
+    _save(save, res)
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return
@@ -369,6 +408,7 @@ def bench_explore(
 @bench_app.command("bandwidth")
 def bench_bandwidth(
     as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
     logs: bool = typer.Option(True, help="Measure every log of ../shared/data/logs."),
     sim_world: str = typer.Option("office", help="World of the simulated exploration."),
     sim_robots: int = typer.Option(3, min=0, help="Robots of the simulated run (0: skip)."),
@@ -407,6 +447,7 @@ def bench_bandwidth(
     summary = bw.summary(results)
     summary["out"] = str(out)
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    _save(save, summary)
     if as_json:
         typer.echo(json.dumps(summary, indent=2, default=float))
         return
@@ -444,6 +485,7 @@ def bench_bandwidth(
 @bench_app.command("cells")
 def bench_cells(
     as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
     sizes: str = typer.Option("1,2,3,4", help="Cell sizes to compare, metres."),
     log: str = typer.Option("freiburg-101-corrected.log.gz", help="Log in ../shared/data/logs."),
 ) -> None:
@@ -456,6 +498,7 @@ def bench_cells(
 
     with Console(stderr=True).status("PolySLAM per cell size"):
         res = cells.run(shared_data_dir() / "logs" / log, [float(s) for s in sizes.split(",")])
+    _save(save, res)
     if as_json:
         typer.echo(json.dumps(res, indent=2))
         return
@@ -484,6 +527,7 @@ def bench_cells(
 @bench_app.command("load")
 def bench_load(
     as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
     robots: int = typer.Option(10, min=1, help="Robots (agent processes)."),
     world: str = typer.Option("data:maze", help="World to explore."),
     duration: float = typer.Option(1800.0, help="Soak length, wall-clock seconds."),
@@ -503,6 +547,7 @@ def bench_load(
 
     with Console(stderr=True).status(f"{robots} robots for {duration:.0f} s"):
         res = load.run(robots, world, duration, out, robots_nice=robots_nice)
+    _save(save, res)
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return

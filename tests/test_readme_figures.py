@@ -1,0 +1,74 @@
+"""Every headline figure in the README comes from a committed result file.
+
+A row of the README's headline table ends in a cell like
+```bandwidth.json#runs.{aces-corrected,csail-corrected}.delta_bytes_ratio_vs_keyframe_scans```
+(braces expand to one key each); its value cell lists the figures in the same order, as
+printed (``never`` for a missing value). Each must equal the file's value rounded to the
+digits shown.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from pathlib import Path
+
+import pytest
+
+from polyswarm.benchmarks.results import RESULTS_DIR, load, lookup
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+REF = re.compile(r"`([\w.-]+)\.json#([^`]+)`")
+NUMBER = re.compile(r"never|-?\d[\d,]*(?:\.\d+)?")
+
+
+def expand(key: str) -> list[str]:
+    """``a.{b,c}.d`` -> ``a.b.d``, ``a.c.d`` (several braces: every combination)."""
+    parts = re.split(r"\{([^}]*)\}", key)
+    fixed, choices = parts[0::2], [p.split(",") for p in parts[1::2]]
+    out = []
+    for combo in itertools.product(*choices):
+        s = fixed[0]
+        for c, f in zip(combo, fixed[1:], strict=True):
+            s += c + f
+        out.append(s)
+    return out
+
+
+def headline_rows() -> list[tuple[str, str, str, str]]:
+    """(row text, value cell, file name, key) of every table row naming a result."""
+    rows = []
+    for line in README.read_text().splitlines():
+        if not line.startswith("|"):
+            continue
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        m = REF.search(cells[-1])
+        if m and len(cells) >= 3:
+            rows.append((cells[0], cells[1], m.group(1), m.group(2)))
+    return rows
+
+
+def test_the_readme_has_a_headline_table_of_committed_results():
+    rows = headline_rows()
+    assert len(rows) >= 8
+    assert {name for _, _, name, _ in rows} <= {p.stem for p in RESULTS_DIR.glob("*.json")}
+
+
+@pytest.mark.parametrize("row", headline_rows(), ids=lambda r: r[0][:40])
+def test_each_headline_figure_equals_its_result_file(row):
+    what, shown, name, key = row
+    result = load(name)
+    assert "meta" in result, f"{name}.json has no meta (code version, processor, date)"
+    keys = expand(key)
+    printed = NUMBER.findall(shown)
+    assert len(printed) == len(keys), f"{what}: {len(printed)} figures for {len(keys)} keys"
+    for text, k in zip(printed, keys, strict=True):
+        value = lookup(result, k)
+        if text == "never":
+            assert value is None, f"{what}: {k} is {value}, printed never"
+            continue
+        digits = len(text.split(".")[1]) if "." in text else 0
+        assert value is not None, f"{what}: {k} is missing, printed {text}"
+        assert round(float(value), digits) == pytest.approx(float(text.replace(",", ""))), (
+            f"{what}: {k} = {value}, printed {text}"
+        )
