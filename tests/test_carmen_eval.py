@@ -17,7 +17,7 @@ from polyswarm.evaluation import (
     time_to_coverage,
     travelled,
 )
-from polyswarm.io.carmen import read_carmen
+from polyswarm.io.carmen import read_carmen, real_odometry
 from polyswarm.io.tum import read_tum, write_tum
 from polyswarm.odometry import IncrementNoise, noisy_odometry
 from polyswarm.se2 import compose, wrap
@@ -167,3 +167,46 @@ def test_reachable_free_space_is_what_the_footprint_sweeps_less_the_noise_band()
     )
     # a start nowhere near the free space: nothing is reachable
     assert reachable_free(free, 0.2, [(10.0, 10.0)]).is_empty
+
+
+def flaser(x: float, y: float, th: float, t: float) -> str:
+    pose = f"{x} {y} {th}"
+    return f"FLASER 5 1.0 2.0 3.0 3.0 4.0 {pose} {pose} {t} host {t}"
+
+
+def odom(x: float, y: float, th: float, t: float) -> str:
+    return f"ODOM {x} {y} {th} 0 0 0 {t} host {t}"
+
+
+def test_real_odometry_chains_the_wheel_motion_from_each_scans_anchor(tmp_path):
+    """Each scan is followed by an ODOM line at its corrected pose; the ODOM lines up to
+    the next scan integrate the wheels from there. The wheels say: 1.1 m straight ahead,
+    then a 0.2 rad turn and 0.5 m; the corrected poses say 1.0 m and 0.6 m."""
+    lines = [
+        flaser(0, 0, 0, 1),
+        odom(0, 0, 0, 1.1),
+        odom(0.6, 0, 0, 1.5),
+        odom(1.1, 0, 0, 1.9),
+        flaser(1.0, 0, 0, 2),
+        odom(1.0, 0, 0, 2.1),
+        odom(1.0, 0, 0.2, 2.5),
+        odom(1.0 + 0.5 * math.cos(0.2), 0.5 * math.sin(0.2), 0.2, 2.9),
+        flaser(1.6, 0.1, 0.1, 3),
+        odom(1.6, 0.1, 0.1, 3.1),
+    ]
+    p = tmp_path / "real.log"
+    p.write_text("\n".join(lines) + "\n")
+    od = real_odometry(read_carmen(p))
+    assert np.allclose(od[0], [0, 0, 0])
+    assert np.allclose(od[1], [1.1, 0, 0])  # the wheels' 1.1 m, not the corrected 1.0
+    expected = compose(np.array([1.1, 0, 0]), [0.5 * math.cos(0.2), 0.5 * math.sin(0.2), 0.2])
+    assert np.allclose(od[2], expected)
+
+
+def test_a_log_with_only_the_anchoring_odom_lines_has_no_real_odometry(tmp_path):
+    lines = [flaser(0, 0, 0, 1), odom(0, 0, 0, 1.1), flaser(1, 0, 0, 2), odom(1, 0, 0, 2.1)]
+    lines += [flaser(2, 0, 0, 3), odom(2, 0, 0, 3.1)]
+    p = tmp_path / "anchors.log"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataFormatError, match="no raw ODOM"):
+        real_odometry(read_carmen(p))

@@ -19,8 +19,14 @@ def slam_cmd(
     ),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     seed: int = typer.Option(0, help="Seed of the odometry (and sensor) noise."),
+    odometry: str = typer.Option(
+        "log",
+        help="Logs: 'log' = the robot's real wheel odometry (its ODOM lines), 'noise' = "
+        "synthetic noise on the corrected poses' increments (seeded; for logs without "
+        "raw odometry, and stress tests).",
+    ),
     odom_noise: float = typer.Option(
-        1.0, "--odom-noise", help="Logs: multiply the default odometry noise by this factor."
+        1.0, "--odom-noise", help="Logs, --odometry noise: multiply the default noise by this."
     ),
     speed: float = typer.Option(1.0, help="Worlds: driving speed along the route, m/s."),
     config: Path | None = typer.Option(None, help="TOML config."),
@@ -65,7 +71,13 @@ def slam_cmd(
                     )
                 )
             )
-            run = runner.run_log(log, cfg, noise, seed, report)
+            try:
+                source = runner.OdometrySource(odometry)
+            except ValueError:
+                raise PolyswarmError(
+                    f"--odometry must be one of {[str(o) for o in runner.OdometrySource]}"
+                ) from None
+            run = runner.run_log(log, cfg, noise, seed, report, source)
         else:
             run = runner.run_world(world, cfg, seed, speed, report)
     m = runner.write_outputs(run, out, cfg)

@@ -47,6 +47,7 @@ class CarmenLog:
     odometry: np.ndarray  # (k, 4) t x y theta from ODOM lines
     params: dict[str, str] = field(default_factory=dict)
     timestamps_synthesized: bool = False
+    odometry_lines: np.ndarray | None = None  # (k,) line number of each ODOM line
 
     @property
     def reference(self) -> np.ndarray:
@@ -107,7 +108,7 @@ def read_carmen(path: str | Path) -> CarmenLog:
                         )
                     x, y, th, *_ = _floats(tok[1:7], lineno, "ODOM")
                     t = _floats(tok[7:8], lineno, "ODOM timestamp")[0]
-                    odom.append((t, x, y, th))
+                    odom.append((t, x, y, th, lineno))
     except (OSError, EOFError, UnicodeDecodeError) as e:
         raise DataFormatError(f"{p}: cannot read: {e}") from e
     if not raw:
@@ -139,7 +140,44 @@ def read_carmen(path: str | Path) -> CarmenLog:
             amin = -fov / 2
         scan = LaserScan(ranges, amin, inc, 0.05, range_max, float(stamps[k]))
         scans.append(CarmenScan(k, lineno, float(stamps[k]), scan, pose, od))
-    return CarmenLog(str(p), scans, np.array(odom).reshape(-1, 4), params, bool(synthesized))
+    od = np.array(odom, dtype=float).reshape(-1, 5)
+    return CarmenLog(str(p), scans, od[:, :4], params, bool(synthesized), od[:, 4].astype(np.int64))
+
+
+MAX_MISSING_ODOMETRY = 0.05  # share of scan steps without raw ODOM lines a log may have
+
+
+def real_odometry(log: CarmenLog) -> np.ndarray:
+    """The robot's real wheel odometry at every scan, chained from the first scan's pose
+    (``../shared/data/README.md``): after each laser line an ODOM line re-anchors at the
+    corrected pose, and the ODOM lines up to the next laser line integrate the raw wheel
+    odometry from there, so the step to scan i is the motion from that anchor to the
+    last ODOM pose before scan i. A step without raw ODOM lines repeats the previous
+    step's motion. Raises DataFormatError when more than ``MAX_MISSING_ODOMETRY`` of the
+    steps have none (orebro has only the anchors)."""
+    from polyswarm.se2 import compose, relative
+
+    lines = log.odometry_lines
+    if lines is None or len(lines) == 0:
+        raise DataFormatError(f"{log.path}: no ODOM lines (no real odometry)")
+    poses = log.odometry[:, 1:4]
+    scan_lines = np.array([s.line for s in log.scans])
+    out = [np.array(log.scans[0].pose, dtype=float)]
+    missing = 0
+    last = np.zeros(3)
+    for i in range(1, len(log.scans)):
+        between = np.nonzero((lines > scan_lines[i - 1]) & (lines < scan_lines[i]))[0]
+        if len(between) >= 2:
+            last = relative(poses[between[0]], poses[between[-1]])
+        else:
+            missing += 1
+        out.append(compose(out[-1], last))
+    if missing > MAX_MISSING_ODOMETRY * max(len(log.scans) - 1, 1):
+        raise DataFormatError(
+            f"{log.path}: {missing} of {len(log.scans) - 1} scan steps have no raw ODOM "
+            "lines (no real odometry: use synthetic noise)"
+        )
+    return np.array(out)
 
 
 def _flaser(tok: list[str], lineno: int):
