@@ -129,8 +129,8 @@ def update_times(world: str = "office", seed: int = 0, radius: float = 0.25) -> 
     maps = []
     orig = PolySlam.process
 
-    def record(self, scan, odom):
-        step = orig(self, scan, odom)
+    def record(self, scan, odom, motion=None):
+        step = orig(self, scan, odom, motion)
         if step.delta is not None:
             maps.append((self.map, frozenset(c.index for c in step.delta.cells)))
         return step

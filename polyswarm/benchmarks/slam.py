@@ -16,9 +16,10 @@ import shapely
 
 from polyswarm.config import Config, RefineConfig
 from polyswarm.data import WORLDS, log_paths
+from polyswarm.errors import DataFormatError
 from polyswarm.odometry import IncrementNoise
 from polyswarm.refine import refine_polygon
-from polyswarm.runners.slam import metrics, run_log, run_world, stage_percentiles
+from polyswarm.runners.slam import OdometrySource, metrics, run_log, run_world, stage_percentiles
 
 THESIS_MAX_ERROR_RATIO = {"loop": 0.0043, "cross": 0.0016, "zigzag": 0.00074, "maze": 0.00062}
 THESIS_POLYGONS = {"loop": 209585, "cross": 429876, "zigzag": 469110}  # Table 5.8, no overlay
@@ -62,6 +63,26 @@ def refinement(seeds=(0, 1, 2, 3, 4)) -> dict:
             "farthest_point_m_max": float(max(far)),
         }
     return out
+
+
+def _real_odometry(path, cfg: Config, progress) -> dict:
+    """The same log on the robot's real wheel odometry (its ODOM lines), where it has
+    them (orebro has none: None)."""
+    if progress:
+        progress(f"log {path.name}, real odometry")
+    try:
+        m = metrics(run_log(path, cfg, odometry=OdometrySource.LOG))
+    except DataFormatError:
+        return {"real_odometry": None}
+    return {
+        "real_odometry": {
+            "ate_rmse_m": m["ate_rmse_m"],
+            "odometry_ate_rmse_m": m["odometry_ate_rmse_m"],
+            "ate_rmse_online_m": m["ate_rmse_online_m"],
+            "loops_closed": m["loops_closed"],
+            "reseeded_keyframes": m["reseeded_keyframes"],
+        }
+    }
 
 
 def run(progress: Callable[[str], None] | None = None, worlds=WORLDS, log_seeds: int = 1) -> dict:
@@ -119,6 +140,7 @@ def run(progress: Callable[[str], None] | None = None, worlds=WORLDS, log_seeds:
             "max_trans_error_m": m["max_trans_error_m"],
             "distance_travelled_m": m["distance_travelled_m"],
         }
+        res["logs"][p.name.split("-corrected")[0]].update(_real_odometry(p, cfg, progress))
     if progress:
         progress("refinement")
     res["refinement_curves"] = refinement()

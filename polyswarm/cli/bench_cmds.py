@@ -173,8 +173,17 @@ def bench_slam(
     for name, m in res["logs"].items():
         rows.append(
             (
-                f"log {name}: ATE (odometry)",
+                f"log {name}: ATE (odometry), synthetic noise",
                 f"{m['ate_rmse_m']:.3f} m ({m['odometry_ate_rmse_m']:.3f} m)",
+            )
+        )
+        real = m.get("real_odometry")
+        rows.append(
+            (
+                f"log {name}: ATE (odometry), real wheel odometry",
+                "none in the log"
+                if real is None
+                else f"{real['ate_rmse_m']:.3f} m ({real['odometry_ate_rmse_m']:.3f} m)",
             )
         )
         if len(m["ate_rmse_m_by_seed"]) > 1:
