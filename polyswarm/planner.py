@@ -389,6 +389,14 @@ def _channel(poly: shapely.Polygon, start: np.ndarray, goal: np.ndarray) -> np.n
     q = np.rint(xy * 1e6).astype(np.int64)
     _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
     tri = first[inv.ravel()][tri]
+    # earcut can return triangles outside a polygon whose rings touch themselves (a
+    # PolySLAM map's piece did: one triangle spanned the office, and the "shortest path"
+    # went straight through four walls); keep only those inside
+    cent = (xy[tri[:, 0]] + xy[tri[:, 1]] + xy[tri[:, 2]]) / 3.0
+    shapely.prepare(poly)
+    tri = tri[shapely.contains_xy(poly, cent[:, 0], cent[:, 1])]
+    if len(tri) == 0:
+        return None
     a, b, c = xy[tri[:, 0]], xy[tri[:, 1]], xy[tri[:, 2]]
     ts, tg = _locate(a, b, c, start), _locate(a, b, c, goal)
     if ts is None or tg is None:
@@ -409,17 +417,38 @@ def _channel(poly: shapely.Polygon, start: np.ndarray, goal: np.ndarray) -> np.n
     if seq is None:
         return None
     portals = [(start, start)]
+    ccw = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]) > 0
     for k in range(len(seq) - 1):
         u, v = next((u, v) for m, u, v in adj[seq[k]] if m == seq[k + 1])
-        pu, pv = xy[u], xy[v]
-        d = cent[seq[k + 1]] - cent[seq[k]]
-        # left and right seen in the direction of travel
-        if d[0] * (pu[1] - cent[seq[k]][1]) - d[1] * (pu[0] - cent[seq[k]][0]) > 0:
-            portals.append((pu, pv))
-        else:
-            portals.append((pv, pu))
+        # left and right seen in the direction of travel, from the triangle's winding:
+        # leaving a counter-clockwise triangle through its edge p -> q, q is on the left
+        # (the centroids' direction misjudged it in thin triangles, and the funnel then
+        # pulled the path straight through walls)
+        t = tri[seq[k]]
+        p, q = next((t[i], t[(i + 1) % 3]) for i in range(3) if {t[i], t[(i + 1) % 3]} == {u, v})
+        left, right = (q, p) if ccw[seq[k]] else (p, q)
+        portals.append((xy[left], xy[right]))
     portals.append((goal, goal))
-    return funnel(portals)
+    path = funnel(portals)
+    inside = poly.buffer(ENTRY_INSET_M)
+    if inside.covers(shapely.LineString(path)):
+        return path
+    # never a path out of the free space: the portals' midpoints, shortcut where possible
+    mids = [start, *((pl + pr) / 2.0 for pl, pr in portals[1:-1]), goal]
+    return _shortcut(np.array(mids), inside)
+
+
+def _shortcut(pts: np.ndarray, region) -> np.ndarray:
+    """The path through ``pts`` with every run of points skipped that a straight segment
+    inside ``region`` can replace."""
+    out, i = [pts[0]], 0
+    while i < len(pts) - 1:
+        j = len(pts) - 1
+        while j > i + 1 and not region.covers(shapely.LineString([pts[i], pts[j]])):
+            j -= 1
+        out.append(pts[j])
+        i = j
+    return np.array(out)
 
 
 def _locate(a, b, c, p) -> int | None:

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -254,3 +255,33 @@ def test_seen_obstacles_the_map_lacks_are_kept_clear_of_like_walls():
     dense = np.concatenate([np.linspace(a, b, 50) for a, b in itertools.pairwise(pts)])
     gap = np.min(np.hypot(*(dense[:, None, :] - wall[None, :, :]).transpose(2, 0, 1)))
     assert gap >= R - 1e-6
+
+
+def test_the_shortest_path_in_a_polygon_never_leaves_it():
+    """Random star-shaped polygons (many thin triangles): the path between two inside
+    points stays inside. Portals oriented by the centroids' direction put 1 path in 400
+    straight through the polygon's boundary (on a PolySLAM office map: four walls)."""
+    from polyswarm.planner import _channel
+
+    rng = np.random.default_rng(1)
+    tried = 0
+    for _ in range(400):
+        n = int(rng.integers(8, 40))
+        ang = np.sort(rng.uniform(0, 2 * np.pi, n))
+        r = rng.uniform(0.3, 5.0, n)
+        poly = shapely.set_precision(
+            shapely.Polygon(np.stack([r * np.cos(ang), r * np.sin(ang)], 1)), 1e-6
+        )
+        inner = poly.buffer(-0.01)
+        if poly.geom_type != "Polygon" or inner.geom_type != "Polygon" or inner.is_empty:
+            continue
+        pts = []
+        while len(pts) < 2:
+            p = rng.uniform(-5, 5, 2)
+            if inner.contains(shapely.Point(p)):
+                pts.append(p)
+        path = _channel(poly, pts[0], pts[1])
+        tried += 1
+        assert path is not None and poly.buffer(1e-6).covers(shapely.LineString(path))
+        assert np.allclose(path[0], pts[0]) and np.allclose(path[-1], pts[1])
+    assert tried > 300
