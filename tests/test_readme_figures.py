@@ -2,9 +2,9 @@
 
 A row of the README's headline table ends in a cell like
 ```bandwidth.json#runs.{aces-corrected,csail-corrected}.delta_bytes_ratio_vs_keyframe_scans```
-(braces expand to one key each); its value cell lists the figures in the same order, as
-printed (``never`` for a missing value). Each must equal the file's value rounded to the
-digits shown.
+(braces expand to one key each; a ``*100`` suffix scales the values, for percentages);
+its value cell lists the figures in the same order, as printed (``never`` for a missing
+value). Each must equal the file's value rounded to the digits shown.
 """
 
 from __future__ import annotations
@@ -59,6 +59,8 @@ def test_each_headline_figure_equals_its_result_file(row):
     what, shown, name, key = row
     result = load(name)
     assert "meta" in result, f"{name}.json has no meta (code version, processor, date)"
+    key, _, factor = key.partition("*")
+    scale = float(factor) if factor else 1.0
     keys = expand(key)
     printed = NUMBER.findall(shown)
     assert len(printed) == len(keys), f"{what}: {len(printed)} figures for {len(keys)} keys"
@@ -69,6 +71,6 @@ def test_each_headline_figure_equals_its_result_file(row):
             continue
         digits = len(text.split(".")[1]) if "." in text else 0
         assert value is not None, f"{what}: {k} is missing, printed {text}"
-        assert round(float(value), digits) == pytest.approx(float(text.replace(",", ""))), (
+        assert round(scale * float(value), digits) == pytest.approx(float(text.replace(",", ""))), (
             f"{what}: {k} = {value}, printed {text}"
         )
