@@ -8,8 +8,8 @@ a robot reached or failed its target, joined or left):
   1. frontier targets of the merged map (reachable goal points, blacklist applied);
   2. path costs from every robot over the merged map's navigation graph;
   3. assignment by strategy (hungarian / greedy / nearest) with hysteresis;
-  4. failures: unreachable, or no progress for a timeout (unless the robot itself hardly
-     moved: then it is stuck, not the target) count against a target; after
+  4. failures: unreachable, or no progress for a timeout, count against a target (half
+     when the robot itself hardly moved: then it is mostly stuck itself); after
      ``blacklist_after_failures`` it is blacklisted. A target reached
      whose frontier is still there after the robot looked at it is blacklisted after
      ``blacklist_after_looks`` such looks;
