@@ -97,3 +97,18 @@ def test_log_lines_go_to_standard_error():
     )
     assert "polyswarm.x: a log line" in p.stderr
     assert p.stdout == ""
+
+
+def test_slam_on_a_log_without_raw_odometry_says_how_to_run_it(tmp_path):
+    """A log with only the anchoring ODOM lines has no real odometry: a one-line error
+    that names the option (not a traceback, not synthetic noise unasked)."""
+    lines = []
+    for k in range(4):
+        pose = f"{k} 0 0"
+        lines.append(f"FLASER 3 1.0 2.0 3.0 {pose} {pose} {k + 1} h {k + 1}")
+        lines.append(f"ODOM {pose} 0 0 0 1 h 1")
+    log = tmp_path / "anchors.log"
+    log.write_text("\n".join(lines) + "\n")
+    p = run("slam", str(log), "-o", str(tmp_path / "out"), check=False)
+    assert p.returncode == 1
+    assert p.stderr.strip().startswith("error:") and "--odometry noise" in p.stderr

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from polyswarm.cli import PROFILE_HELP, app, load_cfg
-from polyswarm.errors import PolyswarmError
+from polyswarm.errors import DataFormatError, PolyswarmError
 
 
 @app.command("slam")
@@ -77,7 +77,12 @@ def slam_cmd(
                 raise PolyswarmError(
                     f"--odometry must be one of {[str(o) for o in runner.OdometrySource]}"
                 ) from None
-            run = runner.run_log(log, cfg, noise, seed, report, source)
+            try:
+                run = runner.run_log(log, cfg, noise, seed, report, source)
+            except DataFormatError as e:
+                if source != runner.OdometrySource.LOG or "ODOM" not in str(e):
+                    raise
+                raise DataFormatError(f"{e}; run with --odometry noise") from None
         else:
             run = runner.run_world(world, cfg, seed, speed, report)
     m = runner.write_outputs(run, out, cfg)
