@@ -230,8 +230,9 @@ class RobotAgent:
             scan, self.cfg.slam.frontier_range_m, self._mount(), motion=motion
         )  # de-skewed too: a TurtleBot3 turning at 2.8 rad/s sweeps 0.57 rad per scan
         xy = pts.xy[pts.valid]
-        self._remember_unmapped(stamp_s, masked, motion)
-        out.cmd = self.behaviour.step(stamp_s, self.pose, xy, self._unexplained(xy), turned)
+        world = transform_points(self.pose, xy)
+        self._remember_unmapped(stamp_s, world)
+        out.cmd = self.behaviour.step(stamp_s, self.pose, xy, self._unexplained(world), turned)
         self.follower.sent(*out.cmd)  # arcs start from what the base does
         # 4. pose and state for the coordinator
         if stamp_s - self._last_pose_t >= POSE_PERIOD_S or step.delta is not None:
@@ -247,8 +248,7 @@ class RobotAgent:
     def _without_peers(self, scan: LaserScan, now_s: float) -> LaserScan:
         """The scan with returns from other robots (within ``PEER_MASK_M`` of a fresh
         peer pose) turned into dropouts: neither mapped nor matched by ICP."""
-        peers = [xy for t, xy in self.peers.values() if now_s - t <= PEER_FRESH_S]
-        if not peers:
+        if not self._fresh_peers(now_s):
             return scan
         r = np.asarray(scan.ranges, dtype=float)
         ok = np.isfinite(r)
@@ -256,31 +256,35 @@ class RobotAgent:
         a = beam_angles(scan, mount)
         rr = np.where(ok, r, 0.0)
         ends = np.stack([rr * np.cos(a), rr * np.sin(a)], axis=1) + mount[:2]
-        world = transform_points(self.pose, ends)
-        near = np.zeros(len(r), dtype=bool)
-        for xy in peers:
-            near |= np.hypot(*(world - xy).T) <= PEER_MASK_M
-        hit = ok & near
+        hit = ok & self._near_peers(transform_points(self.pose, ends), now_s)
         if not hit.any():
             return scan
         self.stats.peer_returns_masked += int(hit.sum())
         return replace(scan, ranges=np.where(hit, np.nan, r))
 
-    def _remember_unmapped(self, stamp_s: float, scan: LaserScan, motion) -> None:
-        """Close returns (other robots left out) that the planning map does not hold:
-        the planner keeps clear of them (``agents.seen``)."""
-        self._now_s = stamp_s
-        pts = scan_to_points(scan, self.cfg.slam.frontier_range_m, self._mount(), motion=motion)
-        world = transform_points(self.pose, pts.xy[pts.valid])
-        pmap = self.merged if self.merged is not None else self.slam.map
-        self.seen.add(stamp_s, world, self.pose[:2], pmap)
+    def _fresh_peers(self, now_s: float) -> list[np.ndarray]:
+        return [xy for t, xy in self.peers.values() if now_s - t <= PEER_FRESH_S]
 
-    def _unexplained(self, xy_robot: np.ndarray) -> np.ndarray:
-        """Scan points (robot frame) farther than ``UNEXPLAINED_M`` from every obstacle
+    def _near_peers(self, world: np.ndarray, now_s: float) -> np.ndarray:
+        """Which points (world frame) lie within ``PEER_MASK_M`` of a fresh peer pose."""
+        near = np.zeros(len(world), dtype=bool)
+        for xy in self._fresh_peers(now_s):
+            near |= np.hypot(*(world - xy).T) <= PEER_MASK_M
+        return near
+
+    def _remember_unmapped(self, stamp_s: float, world: np.ndarray) -> None:
+        """Close returns (world frame; other robots left out) that the planning map does
+        not hold: the planner keeps clear of them (``agents.seen``)."""
+        self._now_s = stamp_s
+        pmap = self.merged if self.merged is not None else self.slam.map
+        keep = ~self._near_peers(world, stamp_s)
+        self.seen.add(stamp_s, world[keep], self.pose[:2], pmap)
+
+    def _unexplained(self, world: np.ndarray) -> np.ndarray:
+        """Scan points (world frame) farther than ``UNEXPLAINED_M`` from every obstacle
         vector of the robot's own map: something that moves, or not mapped yet."""
-        if len(xy_robot) == 0:
+        if len(world) == 0:
             return np.zeros(0, dtype=bool)
-        world = transform_points(self.pose, xy_robot)
         m = self.slam.map
         st, en, _ = m.vectors([VectorType.OBSTACLE], m.cells_within(*self.pose[:2], NEAR_M))
         return clear_of(world, st, en, UNEXPLAINED_M)

@@ -57,3 +57,19 @@ def test_another_robot_in_the_scan_is_neither_mapped_nor_matched():
     mid = 0.5 * (st + en)
     assert len(st) and np.hypot(*(mid - (2.0, 0.0)).T).min() > 1.0
     assert agent.stats.peer_returns_masked - masked_before == on_peer.sum()
+
+
+def test_close_returns_off_the_map_are_remembered_for_planning_but_not_a_peers():
+    """An obstacle 1 m ahead that the map does not hold goes into the planner's seen
+    obstacles; another robot 1 m to the side does not (it moves)."""
+    agent = RobotAgent("r1", Config(), (0.0, 0.0, 0.0))
+    agent.on_odom(0.0, Odometry(0.0, 0.0, 0.0))
+    agent.on_scan(0.0, room_scan(0.0))  # the first keyframe: walls of a room 5 m away
+    agent.on_peer_pose("r2", 0.1, Pose(0.0, 1.0, 0.0))
+    box = np.array([[1.0, y] for y in np.linspace(-0.2, 0.2, 5)])  # world frame, 0.1 m apart
+    peer = np.array([[x, 1.0] for x in np.linspace(-0.15, 0.15, 7)])
+    before = len(agent.seen)
+    agent._remember_unmapped(0.1, np.vstack([box, peer]))
+    seen = agent.seen.points(0.1)
+    assert len(agent.seen) - before == len(box)
+    assert np.hypot(*(seen[:, None, :] - peer[None]).transpose(2, 0, 1)).min() > 0.5

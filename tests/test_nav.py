@@ -285,3 +285,16 @@ def test_the_shortest_path_in_a_polygon_never_leaves_it():
         assert path is not None and poly.buffer(1e-6).covers(shapely.LineString(path))
         assert np.allclose(path[0], pts[0]) and np.allclose(path[-1], pts[1])
     assert tried > 300
+
+
+def test_the_fallback_path_keeps_only_the_corners_it_needs_and_stays_inside():
+    """Portal midpoints through an L-shaped corridor, shortcut: the corner remains, the
+    points a straight segment can skip go."""
+    from polyswarm.planner import _shortcut
+
+    corridor = shapely.Polygon([(0, 0), (10, 0), (10, 10), (8, 10), (8, 2), (0, 2)])
+    mids = np.array([(1, 1), (3, 1), (5, 1), (7, 1), (9, 1), (9, 3), (9, 5), (9, 9)], float)
+    path = _shortcut(mids, corridor)
+    assert corridor.covers(shapely.LineString(path))
+    assert np.allclose(path[0], (1, 1)) and np.allclose(path[-1], (9, 9))
+    assert 3 <= len(path) < len(mids)

@@ -1,6 +1,7 @@
 """The pure ray caster and the keyframe polygon on a square room checkable by hand."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -153,3 +154,23 @@ def test_deskewing_puts_a_turning_robots_sweep_back_in_one_frame():
     assert wall_error(fixed).max() < 1e-6
     assert wall_error(skewed).max() > 0.2
     assert deskew_motion(LaserScan(ranges, angles[0], 0.01, 0.05, 30.0), odom_at) is None
+
+
+def test_a_run_of_zeros_between_returns_too_close_to_measure_is_not_free_space():
+    """A TurtleBot3 brushing a wall: the LDS-01 reads below its 0.12 m minimum as 0.0,
+    the same as no return. Between returns at 0.2-0.3 m that run is the wall itself;
+    read as free space it cut 2.8 m through it."""
+    r = np.full(360, 2.0)
+    r[80:100] = 0.25  # the wall, close
+    r[100:120] = 0.0  # closer still: below range_min
+    r[120:140] = 0.25
+    scan = LaserScan(r, 0.0, 2 * np.pi / 360, 0.12, 3.5)
+    pts = scan_to_points(scan, 0.2, no_return_free_m=1.5, out_of_range="zero")
+    d = np.hypot(*pts.xy.T)
+    assert np.count_nonzero(~pts.valid) == 20
+    assert np.allclose(d[~pts.valid], 0.2)  # unknown: a short frontier point, not 1.5 m
+    # the same run between far returns is an open door: free space
+    far = r.copy()
+    far[80:100] = far[120:140] = 2.0
+    pts = scan_to_points(replace(scan, ranges=far), 0.2, no_return_free_m=1.5, out_of_range="zero")
+    assert np.allclose(np.hypot(*pts.xy.T)[~pts.valid], 1.5)

@@ -1,0 +1,46 @@
+"""Where a run's robots spend their time, from their true trajectories.
+
+    python examples/trajectory_speeds.py runs/bench-thesis/thesis-office-3-hungarian-0
+
+Shares of time standing, turning in place, driving below 80 % of the top speed seen
+(the 99th percentile) and at it; over all robots of the run folder(s).
+"""
+
+from __future__ import annotations
+
+import glob
+import sys
+
+import numpy as np
+
+from polyswarm.io.tum import read_tum
+
+STILL_MPS = 0.03  # slower than this is not driving
+STILL_RADPS = 0.1  # ... and turning slower than this is standing
+
+
+def shares(run: str) -> tuple[float, dict[str, float]]:
+    total = {"standing": 0.0, "turning": 0.0, "slow": 0.0, "fast": 0.0}
+    top = 0.0
+    for path in sorted(glob.glob(f"{run}/trajectories/*_truth.tum")):
+        t, pose = read_tum(path)
+        dt = np.diff(t)
+        ok = dt > 0
+        v = np.hypot(*np.diff(pose[:, :2], axis=0).T)[ok] / dt[ok]
+        w = np.abs(np.diff(np.unwrap(pose[:, 2])))[ok] / dt[ok]
+        dt = dt[ok]
+        top = max(top, float(np.percentile(v, 99)))
+        standing = (v < STILL_MPS) & (w < STILL_RADPS)
+        turning = (v < STILL_MPS) & ~standing
+        slow = (v >= STILL_MPS) & (v < 0.8 * top)
+        for k, m in (("standing", standing), ("turning", turning), ("slow", slow)):
+            total[k] += float(dt[m].sum())
+        total["fast"] += float(dt[v >= 0.8 * top].sum())
+    whole = sum(total.values())
+    return top, {k: v / whole for k, v in total.items()}
+
+
+if __name__ == "__main__":
+    for run in sys.argv[1:]:
+        top, s = shares(run)
+        print(run, f"top {top:.2f} m/s", ", ".join(f"{k} {v:.0%}" for k, v in s.items()))
