@@ -48,6 +48,7 @@ from polyswarm.refine import refine_polygon
 from polyswarm.scan import LaserScan, scan_to_points
 from polyswarm.se2 import compose, relative, transform_points, wrap
 from polyswarm.submap import KeyframeStore
+from polyswarm.trim import trim_keyframe
 
 log = logging.getLogger(__name__)
 
@@ -245,9 +246,10 @@ class PolySlam:
         # 7. merge into the robot's map, its vertices on the wire's grid; the changed cells
         # are the delta, and the merge itself is a smaller one
         base, op = self.map.version, None
-        snapped = snap_polygon(kf, self._quantum_u) if self._quantum_u else None
+        news = trim_keyframe(kf, self.map, self.merge_options) if self.cfg.trim_merges else kf
+        snapped = snap_polygon(news, self._quantum_u) if self._quantum_u else None
         try:
-            merged = self.map.merge(kf if snapped is None else snapped, self.merge_options)
+            merged = self.map.merge(news if snapped is None else snapped, self.merge_options)
             self.map = merged.map
             if snapped is not None and merged.changed:
                 digest = cells_digest(merged.map.cells[i] for i in merged.changed)

@@ -1,0 +1,120 @@
+"""Trimming a keyframe to what can change the map (polyswarm.trim), on rooms you can draw."""
+
+import numpy as np
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from polyswarm.polymap import GridPolyMap, MergeOptions, TypedPolygon, VectorType
+from polyswarm.trim import trim_keyframe
+
+O, F = VectorType.OBSTACLE, VectorType.FRONTIER
+OPTS = MergeOptions(
+    min_growth_m=0.05,
+    obstacle_snap_m=0.05,
+    notch_fill_m=0.01,
+    obstacle_snap_behind_m=0.1,
+    obstacle_snap_front_m=0.08,
+)
+
+
+def _walls(corners, per_side: int, noise_m: float, types, seed: int = 0) -> TypedPolygon:
+    """A polygon through ``corners`` with ``per_side`` vertices on each side, pushed off
+    the side by up to ``noise_m`` (a lidar re-observing the walls), side k typed types[k]."""
+    rng = np.random.default_rng(seed)
+    xy, ty = [], []
+    c = np.asarray(corners, float)
+    for k in range(len(c)):
+        a, b = c[k], c[(k + 1) % len(c)]
+        normal = np.array([a[1] - b[1], b[0] - a[0]]) / np.hypot(*(b - a))
+        for t in np.linspace(0, 1, per_side, endpoint=False):
+            off = 0.0 if t == 0 else rng.uniform(-noise_m, noise_m)
+            xy.append(a + t * (b - a) + off * normal)
+            ty.append(types[k])
+    return TypedPolygon.from_points(np.array(xy), np.array(ty))
+
+
+def _room(types=(O, O, O, O)) -> GridPolyMap:
+    room = TypedPolygon.from_points(
+        np.array([[0, 0], [4, 0], [4, 3], [0, 3]], float), np.array(types)
+    )
+    return GridPolyMap.from_polygons([room], cell_size=2.0)
+
+
+def _region(pmap: GridPolyMap):
+    return shapely.union_all([c.region for c in pmap.cells.values()])
+
+
+def _length(pmap: GridPolyMap, kind: VectorType) -> float:
+    total = 0.0
+    for c in pmap.cells.values():
+        s, e = c.vectors_of_type(kind)
+        total += float(np.hypot(*(e - s).T).sum())
+    return total
+
+
+def test_a_re_observed_room_loses_its_wall_vertices_and_changes_nothing():
+    pmap = _room()
+    corners = [[0.01, 0.01], [3.99, 0.01], [3.99, 2.99], [0.01, 2.99]]
+    kf = _walls(corners, per_side=20, noise_m=0.01, types=(O, O, O, O))
+    out = trim_keyframe(kf, pmap, OPTS)
+    assert len(out.shell) <= 12  # 80 vertices, of which a few per wall stay
+    a = pmap.merge(kf, OPTS).map
+    b = pmap.merge(out, OPTS).map
+    assert abs(_region(a).area - _region(b).area) < 1e-6
+    assert abs(_length(a, O) - _length(b, O)) < 1e-6
+
+
+def test_new_space_is_kept_vertex_for_vertex():
+    pmap = _room()
+    # the keyframe runs from inside the room into new space beyond its right wall
+    corners = [[3.0, 0.5], [7.0, 0.5], [7.0, 2.5], [3.0, 2.5]]
+    kf = _walls(corners, per_side=10, noise_m=0.0, types=(F, O, F, F))
+    out = trim_keyframe(kf, pmap, OPTS)
+    outside = ~shapely.covers(_region(pmap).buffer(0.05), shapely.points(kf.shell.xy))
+    kept = {tuple(p) for p in out.shell.xy}
+    assert all(tuple(p) in kept for p in kf.shell.xy[outside])
+    assert len(out.shell) < len(kf.shell)  # but the part inside the room went
+    a, b = pmap.merge(kf, OPTS).map, pmap.merge(out, OPTS).map
+    assert abs(_region(a).area - _region(b).area) < 1e-6
+    assert abs(_length(a, F) - _length(b, F)) < 1e-6
+
+
+def test_walls_beside_an_old_frontier_are_kept_so_they_close_it():
+    # the room's top side is a frontier; the keyframe sees a wall there
+    pmap = _room((O, O, F, O))
+    corners = [[0.01, 0.01], [3.99, 0.01], [3.99, 2.99], [0.01, 2.99]]
+    kf = _walls(corners, per_side=20, noise_m=0.005, types=(O, O, O, O))
+    out = trim_keyframe(kf, pmap, OPTS)
+    top = kf.shell.xy[:, 1] > 2.9
+    kept = {tuple(p) for p in out.shell.xy}
+    assert all(tuple(p) in kept for p in kf.shell.xy[top])
+    a, b = pmap.merge(kf, OPTS).map, pmap.merge(out, OPTS).map
+    assert _length(a, F) < 1e-6 and _length(b, F) < 1e-6  # closed either way
+
+
+def test_nothing_mapped_nothing_trimmed():
+    kf = _walls([[0, 0], [4, 0], [4, 3], [0, 3]], 10, 0.01, (O, O, O, O))
+    assert trim_keyframe(kf, GridPolyMap(2.0), OPTS) is kf
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.floats(-1.5, 1.5),
+    st.floats(-1.0, 1.0),
+    st.integers(4, 30),
+    st.floats(0.0, 0.03),
+    st.integers(0, 10_000),
+)
+def test_trimmed_merge_explores_what_the_keyframe_explores(dx, dy, per_side, noise, seed):
+    """Property: merging the trimmed keyframe gives the explored space and the frontiers
+    of merging the keyframe, up to slivers thinner than min_growth_m."""
+    pmap = _room((O, O, F, O))
+    corners = np.array([[0.5, 0.5], [3.5, 0.5], [3.5, 2.5], [0.5, 2.5]]) + np.array([dx, dy])
+    kf = _walls(corners, per_side, noise, (O, F, O, F), seed)
+    out = trim_keyframe(kf, pmap, OPTS)
+    out.validate()
+    a, b = _region(pmap.merge(kf, OPTS).map), _region(pmap.merge(out, OPTS).map)
+    assert shapely.covers(b.buffer(OPTS.min_growth_m), a)
+    assert shapely.covers(a.buffer(OPTS.min_growth_m), b)
+    assert abs(a.area - b.area) <= 0.05 * OPTS.min_growth_m * a.length
