@@ -38,7 +38,15 @@ def agent_cmd(
     ),
     duration: float = typer.Option(0.0, help="Stop after this many wall seconds (0: run)."),
     replay: Path | None = typer.Option(
-        None, help="Feed this CARMEN log (.log or .log.gz) instead of live sensors."
+        None,
+        help="Feed this CARMEN log (.log or .log.gz) or ROS bag (ROS 1 .bag; rosbag2 "
+        "folder, .mcap or .db3) instead of live sensors.",
+    ),
+    scan_topic: str | None = typer.Option(
+        None, help="--replay of a bag: its sensor_msgs/LaserScan topic (default: the only one)."
+    ),
+    odom_topic: str | None = typer.Option(
+        None, help="--replay of a bag: its nav_msgs/Odometry topic (default: the only one)."
     ),
     rate: float = typer.Option(
         1.0, help="Replay speed: log seconds per wall second (0: as fast as the agent runs)."
@@ -68,13 +76,23 @@ def agent_cmd(
     stop = stop_on_signals()
     player = None
     if replay is not None:
-        from polyswarm.runners.replay import LogPlayer, start_player
+        from polyswarm.runners.replay import BagPlayer, LogPlayer, start_player
+        from protocols.bags import choose_mount, is_bag
 
-        player = LogPlayer(replay, rate)
-        # the log's scans arrive as native messages; commands carry the acknowledgements
-        cfg = dataclasses.replace(
-            cfg, agent=dataclasses.replace(cfg.agent, source="native", output="native")
-        )
+        if is_bag(replay):
+            # the bag's messages arrive as ROS 2 CDR, as from a robot through the bridge
+            io = dataclasses.replace(cfg.agent, source="ros2", output="native")
+            player = BagPlayer(replay, io, rate, scan_topic, odom_topic)
+            mount, _ = choose_mount(cfg.slam.mount, player.bag.mount, str(replay))
+            cfg = dataclasses.replace(
+                cfg, agent=io, slam=dataclasses.replace(cfg.slam, mount=mount)
+            )
+        else:
+            player = LogPlayer(replay, rate)
+            # the log's scans arrive as native messages; commands carry the acknowledgements
+            cfg = dataclasses.replace(
+                cfg, agent=dataclasses.replace(cfg.agent, source="native", output="native")
+            )
         me = SwarmKeys(cfg.comms.swarm).robot(robot_id)
 
         def attach(session, agent, stop_event):
@@ -126,7 +144,7 @@ def agent_cmd(
     s = agent.stats
     typer.echo(
         f"{robot_id}: {s.scans} scans, {s.keyframes} keyframes, {s.distance_m:.1f} m, "
-        f"{agent.bytes_sent} bytes sent",
+        f"{agent.bytes_sent} bytes sent, {s.refused} messages refused",
         err=True,
     )
     exit_now()  # state saved, session closed: no slow teardown
