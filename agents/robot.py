@@ -47,6 +47,7 @@ from protocols.mapcodec import (
     encode_update,
 )
 from protocols.messages import (
+    MAX_STATUS_PATH_POINTS,
     Assignment,
     CoordinatorStatus,
     MapChunk,
@@ -329,7 +330,19 @@ class RobotAgent:
             self.slam.map.version,
             self.bytes_sent,
             self.stats.distance_m,
+            self._path_left(),
         )
+
+    def _path_left(self) -> tuple[tuple[float, float], ...]:
+        """The planned path from the robot on, at most MAX_STATUS_PATH_POINTS points (cm)."""
+        path = self.follower.path
+        if path is None or len(path) == 0:
+            return ()
+        rest = np.vstack([self.pose[:2], path[self.follower.progress + 1 :]])
+        if len(rest) > MAX_STATUS_PATH_POINTS:
+            keep = np.linspace(0, len(rest) - 1, MAX_STATUS_PATH_POINTS).round().astype(int)
+            rest = rest[keep]
+        return tuple((round(float(x), 2), round(float(y), 2)) for x, y in rest)
 
     # -- what the behaviour asks (agents.behaviour.Planning) ------------------------------
 

@@ -137,6 +137,7 @@ class Received:
     stamp_s: float
     msg: Message
     payload: bytes | None = None  # a reassembled map or delta (for MapChunk streams)
+    routed_at: float | None = None  # wall seconds the router stamped (the last chunk's)
 
 
 @dataclass(frozen=True)
@@ -329,7 +330,9 @@ class Bus:
                     if done is None:
                         return
                     msg, payload = done
-                self._put(Received(k, env.sender, env.seq, env.stamp_s, msg, payload))
+                ts = sample.timestamp  # a router stamps what it forwards
+                at = None if ts is None else ts.get_time().timestamp()
+                self._put(Received(k, env.sender, env.seq, env.stamp_s, msg, payload, at))
             except DecodeError as e:
                 self.rejected += 1
                 self._warn(k, f"rejected message on {k}: {e}")

@@ -187,6 +187,38 @@ def bench_bags(
     _emit(res, as_json, "ROS bags", rows)
 
 
+@bench_app.command("view")
+def bench_view(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    robots: int = typer.Option(10, min=1, help="Robots."),
+    world: str = typer.Option("data:maze", help="World to explore."),
+    duration: float = typer.Option(120.0, help="Wall-clock seconds of each of the two runs."),
+) -> None:
+    """The live view: display latency, its CPU, the coordinator with and without it."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import view
+
+    with Console(stderr=True).status(f"two {duration:.0f} s runs of {robots} robots"):
+        res = view.run(robots, world, duration)
+    _save(save, res)
+    a, b = res["without_view"], res["with_view"]
+
+    def ms(v):
+        return "-" if v is None else f"{v:.0f} ms"
+
+    rows = [
+        ("display latency p95 (publication to page)", ms(res["display_latency_p95_ms"])),
+        ("view process, share of one core", f"{100 * (res['view_cpu_share'] or 0):.1f} %"),
+        (
+            "coordinator cycle p95 without / with the view",
+            f"{ms(a['coordinator_cycle_p95_ms'])} / {ms(b['coordinator_cycle_p95_ms'])}",
+        ),
+    ]
+    _emit(res, as_json, f"live view: {robots} robots on {world}", rows)
+
+
 @bench_app.command("slam")
 def bench_slam(
     as_json: bool = JSON_OPT,

@@ -150,6 +150,46 @@ def agent_cmd(
     exit_now()  # state saved, session closed: no slow teardown
 
 
+@app.command("view")
+def view_cmd(
+    connect: str | None = typer.Option(
+        None, help="Zenoh router to connect to, e.g. tcp/10.0.0.5:7447 (default: comms.endpoint)."
+    ),
+    config: Path | None = CONFIG_OPT,
+    swarm: str | None = typer.Option(None, help="Swarm name (default: comms.swarm)."),
+    zenoh_config: Path | None = typer.Option(None, help=ZENOH_HELP),
+    host: str = typer.Option("127.0.0.1", help="Address the web page is served on."),
+    port: int = typer.Option(8000, min=0, max=65535, help="Port of the web page."),
+    stats: Path | None = typer.Option(
+        None, help="Write the view's figures here at exit (JSON: display latency, CPU)."
+    ),
+) -> None:
+    """The mission live in a browser: merged map, robots, targets, paths (only listens)."""
+    import json
+
+    from agents.session import SessionSpec, stop_on_signals
+    from agents.view import serve
+    from polyswarm.config import load_config
+
+    cfg = load_config(config)
+    zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
+    spec = SessionSpec.client(connect or cfg.comms.endpoint, zconf)
+    typer.echo(f"polyswarm view: http://{host}:{port}/", err=True)
+    state = serve(
+        spec, swarm or cfg.comms.swarm, host, port, cfg.nav.robot_radius_m, stop_on_signals()
+    )
+    figures = state.figures()
+    if stats is not None:
+        stats.write_text(json.dumps(figures, indent=2))
+    p95 = figures["display_latency_p95_ms"]
+    shown = f", display latency p95 {p95:.0f} ms" if p95 is not None else ""
+    typer.echo(
+        f"view: {figures['deltas']} merged deltas, {figures['fetches']} map fetches{shown}, "
+        f"{100 * figures['cpu_share']:.1f} % of a core",
+        err=True,
+    )
+
+
 @app.command("coordinator")
 def coordinator_cmd(
     config: Path | None = CONFIG_OPT,
@@ -218,6 +258,13 @@ def launch_cmd(
         help="Lose, duplicate and reorder received messages at the coordinator and agents "
         "(probabilities), e.g. drop=0.1,dup=0.05,reorder=0.05.",
     ),
+    view_port: int | None = typer.Option(
+        None,
+        "--view",
+        min=0,
+        max=65535,
+        help="Also serve the live view in a browser on this port of 127.0.0.1 (polyswarm view).",
+    ),
 ) -> None:
     """Explore a simulated world with N robots: coordinator, sim and agents as processes.
 
@@ -253,8 +300,11 @@ def launch_cmd(
         load_cfg(config, profile),
         faults=Fault.parse_many(fault),
         link_faults=link_faults,
+        view_port=view_port,
     )
     console = Console(stderr=True)
+    if view_port is not None:
+        console.print(f"live view: http://127.0.0.1:{view_port}/")
 
     def view(obs, wall: float) -> Table:
         cov = obs.coverage[-1][1] if obs.coverage else 0.0
