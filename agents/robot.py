@@ -27,7 +27,7 @@ import numpy as np
 from agents import persist
 from agents.behaviour import Behaviour
 from agents.seen import SeenObstacles
-from polyswarm.config import Config
+from polyswarm.config import Config, SensorSource
 from polyswarm.control import ControlParams, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.navgraph import NavGraph, clear_of
@@ -47,6 +47,7 @@ from protocols.mapcodec import (
     encode_update,
 )
 from protocols.messages import (
+    MAX_STATUS_PATH_POINTS,
     Assignment,
     CoordinatorStatus,
     MapChunk,
@@ -72,6 +73,7 @@ PEER_FRESH_S = 2.0
 # first lane: jumps of 2.5 and 4.2 m along it)
 PEER_MASK_M = 0.6
 SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
+MOUNT_WAIT_SCANS = 20  # scans from a ROS robot without a mount in tf or config: say so
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
 NEAR_OBSTACLE_M = 0.5  # range at which the local controller's margin is judged
 MIN_SAFETY_MARGIN_M = 0.03  # the thesis sensor's 3 sigma of 1 cm: never less
@@ -94,6 +96,7 @@ class AgentStats:
     keyframes: int = 0
     distance_m: float = 0.0
     peer_returns_masked: int = 0  # scan returns taken for other robots, kept from SLAM
+    refused: int = 0  # messages refused: undecodable, or a scan the agent could not use
     slam_ms: list[float] = field(default_factory=list)
 
 
@@ -129,6 +132,7 @@ class RobotAgent:
         )
         self.behaviour = Behaviour(self.id, follower, self, rc.max_angular_radps, lidar.fov_rad)
         self.merged: GridPolyMap | None = None
+        self._mount_said = False  # the lidar mount's source was logged
         self.seen = SeenObstacles()  # obstacles the lidar sees and the planning map lacks
         self._now_s = 0.0
         self.merged_graph: NavGraph | None = None
@@ -293,6 +297,29 @@ class RobotAgent:
         m = self.cfg.slam.mount
         return (m.x_m, m.y_m, m.yaw_rad, m.upside_down)
 
+    def use_tf_mount(self, found) -> None:
+        """The lidar's mount from the robot's /tf_static (``protocols.bags.Mount2D``, or
+        None: nothing new), unless the config sets one; without either, said once after
+        ``MOUNT_WAIT_SCANS`` scans."""
+        from protocols.bags import choose_mount
+
+        if found is None:
+            if (
+                self.cfg.agent.source != SensorSource.NATIVE
+                and self.stats.scans == MOUNT_WAIT_SCANS
+                and not self._mount_said
+            ):
+                self._mount_said = True
+                choose_mount(self.cfg.slam.mount, None, self.id)
+            return
+        mount, source = choose_mount(self.cfg.slam.mount, found, self.id)
+        if source == "tf":
+            if self.stats.scans:
+                log.warning("%s: the mount from tf came after %d scans", self.id, self.stats.scans)
+            self.cfg = replace(self.cfg, slam=replace(self.cfg.slam, mount=mount))
+            self.slam.cfg = replace(self.slam.cfg, mount=mount)
+        self._mount_said = True
+
     def status(self) -> RobotStatus:
         b = self.behaviour
         return RobotStatus(
@@ -303,7 +330,19 @@ class RobotAgent:
             self.slam.map.version,
             self.bytes_sent,
             self.stats.distance_m,
+            self._path_left(),
         )
+
+    def _path_left(self) -> tuple[tuple[float, float], ...]:
+        """The planned path from the robot on, at most MAX_STATUS_PATH_POINTS points (cm)."""
+        path = self.follower.path
+        if path is None or len(path) == 0:
+            return ()
+        rest = np.vstack([self.pose[:2], path[self.follower.progress + 1 :]])
+        if len(rest) > MAX_STATUS_PATH_POINTS:
+            keep = np.linspace(0, len(rest) - 1, MAX_STATUS_PATH_POINTS).round().astype(int)
+            rest = rest[keep]
+        return tuple((round(float(x), 2), round(float(y), 2)) for x, y in rest)
 
     # -- what the behaviour asks (agents.behaviour.Planning) ------------------------------
 
@@ -379,7 +418,7 @@ def run_agent(
     ``attach(session, agent, stop)``, if given, is called once the agent listens (a log
     player feeding it, for example); it may return a function called at shutdown."""
     from agents.session import Bus, is_alive_change, open_session, stop_on_signals
-    from agents.sources import CommandSink, subscribe_sensors
+    from agents.sources import CommandSink, RmwZenohNode, RosFrames, subscribe_sensors
 
     stop = stop or stop_on_signals()
     keys = SwarmKeys(cfg.comms.swarm)
@@ -402,8 +441,13 @@ def run_agent(
     with open_session(session_spec) as session:
         bus = Bus(session, robot_id)
         try:
-            sensors = subscribe_sensors(bus, me, cfg.agent)
-            sink = CommandSink(bus, me, cfg.agent)
+            frames = RosFrames()
+            node = None
+            if cfg.agent.source == SensorSource.RMW_ZENOH:
+                node = RmwZenohNode(bus, cfg.agent, robot_id)
+                node.declare()
+            sensors = subscribe_sensors(bus, me, cfg.agent, frames)
+            sink = CommandSink(bus, me, cfg.agent, node)
             bus.subscribe(keys.all_robots("pose"), Pose)
             bus.subscribe(keys.assignment(robot_id), Assignment)
             bus.subscribe(keys.merged_delta, MapChunk)
@@ -428,6 +472,7 @@ def run_agent(
             need_merged = False
             behind_since = None  # the merged map we hold is older than the coordinator's
             while not stop.is_set() and time.monotonic() < t_end:
+                agent.use_tf_mount(frames.mount())
                 for item in bus.poll(timeout_s=0.05):
                     if stop.is_set():  # a backlog of scans must not outlast the shutdown grace
                         break
@@ -442,6 +487,7 @@ def run_agent(
                             while waiting and scan_end_s(waiting[0][1]) <= item.stamp_s:
                                 _process_scan(bus, me, agent, waiting.pop(0)[1], sink, state_dir)
                         elif isinstance(msg, Scan):
+                            agent.use_tf_mount(frames.mount())  # before the first scan
                             # odometry and scans travel on separate keys: a scan waits
                             # (briefly) for the odometry of its time
                             if agent.latest_odom_s >= scan_end_s(item):
@@ -468,6 +514,7 @@ def run_agent(
                                 need_merged, behind_since = True, None
                     except DecodeError as e:
                         log.warning("%s: rejected %s: %s", robot_id, item.key, e)
+                        agent.stats.refused += 1
                     except PolyswarmError as e:
                         log.warning("%s: %s", robot_id, e)
                 while waiting and time.monotonic() - waiting[0][0] > SCAN_WAIT_S:
@@ -483,6 +530,7 @@ def run_agent(
         finally:
             if attach is not None and detach is not None:
                 detach()
+            agent.stats.refused += bus.rejected  # refused by the decoders on arrival
             bus.close()
             if state_dir:  # the map is on disk already (snapshot and journal): the pose
                 persist.save_pose(
@@ -496,6 +544,7 @@ def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -
         out = agent.on_scan(item.stamp_s, scan_from_message(item.msg, item.stamp_s))
     except PolyswarmError as e:
         log.warning("%s: scan %d refused: %s", agent.id, item.seq, e)
+        agent.stats.refused += 1
         return
     wire = encode_delta(out.delta) if out.delta is not None else None
     if wire is not None and state_dir:

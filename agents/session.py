@@ -137,6 +137,7 @@ class Received:
     stamp_s: float
     msg: Message
     payload: bytes | None = None  # a reassembled map or delta (for MapChunk streams)
+    routed_at: float | None = None  # wall seconds the router stamped (the last chunk's)
 
 
 @dataclass(frozen=True)
@@ -329,7 +330,9 @@ class Bus:
                     if done is None:
                         return
                     msg, payload = done
-                self._put(Received(k, env.sender, env.seq, env.stamp_s, msg, payload))
+                ts = sample.timestamp  # a router stamps what it forwards
+                at = None if ts is None else ts.get_time().timestamp()
+                self._put(Received(k, env.sender, env.seq, env.stamp_s, msg, payload, at))
             except DecodeError as e:
                 self.rejected += 1
                 self._warn(k, f"rejected message on {k}: {e}")
@@ -338,16 +341,20 @@ class Bus:
 
         self._handles.append(self.session.declare_subscriber(key, on_sample))
 
-    def subscribe_raw(self, key: str, decode_fn: Callable[[bytes], tuple[float, Message]]) -> None:
+    def subscribe_raw(
+        self, key: str, decode_fn: Callable[[bytes], tuple[float, Message] | None]
+    ) -> None:
         """Queue messages of a foreign format (ROS 2 CDR): ``decode_fn`` turns the bytes
-        into (stamp, message) or raises DecodeError (counted and logged)."""
+        into (stamp, message), or None when it used them itself (nothing is queued), or
+        raises DecodeError (counted and logged)."""
         seq = iter(range(1 << 62))
 
         def on_sample(sample: zenoh.Sample) -> None:
             k = str(sample.key_expr)
             try:
-                stamp, msg = decode_fn(sample.payload.to_bytes())
-                self._put(Received(k, "ros", next(seq), stamp, msg))
+                got = decode_fn(sample.payload.to_bytes())
+                if got is not None:
+                    self._put(Received(k, "ros", next(seq), got[0], got[1]))
             except DecodeError as e:
                 self.rejected += 1
                 self._warn(k, f"rejected message on {k}: {e}")
@@ -356,11 +363,14 @@ class Bus:
 
         self._handles.append(self.session.declare_subscriber(key, on_sample))
 
-    def put_raw(self, key: str, data: bytes, reliable: bool = False) -> int:
+    def put_raw(
+        self, key: str, data: bytes, reliable: bool = False, attachment: bytes | None = None
+    ) -> int:
         """Send bytes of a foreign format (ROS 2 CDR); returns their size."""
-        self._publisher(key, reliable).put(data)
-        self.bytes_sent[key] = self.bytes_sent.get(key, 0) + len(data)
-        return len(data)
+        self._publisher(key, reliable).put(data, attachment=attachment)
+        n = len(data) + (len(attachment) if attachment else 0)
+        self.bytes_sent[key] = self.bytes_sent.get(key, 0) + n
+        return n
 
     def watch_alive(self, key: str) -> None:
         """Queue liveliness changes under ``key`` (see ``is_alive_change``)."""

@@ -365,6 +365,7 @@ class CommsConfig:
 class SensorSource(StrEnum):
     NATIVE = "native"  # polyswarm Scan and Odometry messages (the simulator, log replay)
     ROS2 = "ros2"  # sensor_msgs/LaserScan and nav_msgs/Odometry CDR (zenoh-bridge-ros2dds)
+    RMW_ZENOH = "rmw_zenoh"  # the same, from a robot whose ROS 2 runs on rmw_zenoh (no bridge)
 
 
 class CommandOutput(StrEnum):
@@ -378,17 +379,24 @@ class CommandOutput(StrEnum):
 class AgentIoConfig:
     """Where a robot agent reads its sensors and sends its commands.
 
-    ``{ns}`` in a key is replaced by ``namespace`` (keys as zenoh-bridge-ros2dds exposes
-    ROS 2 topics: ``/tb3_1/scan`` becomes ``tb3_1/scan``)."""
+    ``{ns}`` in a key is replaced by ``namespace``. With zenoh-bridge-ros2dds started as
+    ``-n /tb3_1`` on a robot whose topics are not namespaced, its ``/scan`` is the key
+    ``tb3_1/scan`` (namespace "tb3_1"); the bridge prepends its namespace to every topic,
+    so a robot that already publishes ``/tb3_1/scan`` through a bridge with ``-n /tb3_1``
+    is on ``tb3_1/tb3_1/scan``. With ``source = "rmw_zenoh"`` the keys are a topic name
+    (``namespace`` + the key) in rmw_zenoh's format (``protocols.rmw_zenoh``)."""
 
     source: str = "native"  # SensorSource
     output: str = "native"  # CommandOutput
     namespace: str = ""
     scan_key: str = "{ns}/scan"
     odom_key: str = "{ns}/odom"
+    tf_static_key: str = "{ns}/tf_static"  # the lidar's mount, unless [slam.mount] sets one
     cmd_vel_key: str = "{ns}/cmd_vel"
     goal_key: str = "{ns}/goal_pose"
     map_frame: str = "map"  # frame id of goals sent to the robot's navigation stack
+    # rmw_zenoh: the robot's ROS_DOMAIN_ID (the first chunk of its keys), 0-232: ROS 2's range
+    domain_id: int = num(0, 0, 232)
 
     def key(self, template: str) -> str:
         return template.replace("{ns}", self.namespace).strip("/")
@@ -613,7 +621,7 @@ def validate(cfg: Config) -> None:
     _choice(cfg.agent.source, SensorSource, "agent.source")
     _choice(cfg.agent.output, CommandOutput, "agent.output")
     _choice(cfg.slam.submap.reference, IcpReference, "slam.submap.reference")
-    for name in ("scan_key", "odom_key", "cmd_vel_key", "goal_key"):
+    for name in ("scan_key", "odom_key", "tf_static_key", "cmd_vel_key", "goal_key"):
         key = cfg.agent.key(getattr(cfg.agent, name))
         if not key or any(ch in key for ch in "*$?#") or "//" in key:
             raise ConfigError(f"agent.{name}: {key!r} is not a plain Zenoh key")

@@ -119,6 +119,11 @@ class PathFollower:
         arcs = np.stack([x, y], axis=-1)[:, 1::2, :]  # every other step: 6 samples
         return arcs, th[:, -1]
 
+    @property
+    def progress(self) -> int:
+        """Index of the path segment the robot is on."""
+        return self._progress
+
     def set_path(self, points: np.ndarray | None) -> None:
         self.path = None if points is None or len(points) == 0 else np.asarray(points, float)
         self._progress = 0

@@ -159,3 +159,25 @@ def reachable_free(
         return shapely.Polygon()
     swept = shapely.intersection(shapely.buffer(shapely.union_all(parts), radius_m), free)
     return shapely.buffer(swept, -tolerance_m, quad_segs=4) if tolerance_m > 0 else swept
+
+
+def occupied_cells(scans, poses: np.ndarray, mount, resolution_m: float = 0.05) -> int:
+    """How many ``resolution_m`` cells the scans' returns fall in, each scan placed at its
+    pose (robot frame, lidar at ``mount`` = (x, y, yaw, upside_down)). The same walls
+    seen from poses that agree fill few cells; drifting poses smear them over more: of
+    two trajectories for the same scans, the one with fewer cells gives the sharper map.
+    A measure for data without ground truth (a recorded bag)."""
+    from polyswarm.scan import beam_angles, classify
+
+    cells = []
+    for scan, (x, y, th) in zip(scans, np.asarray(poses, dtype=float), strict=True):
+        valid = classify(scan)[0]
+        r = np.asarray(scan.ranges, dtype=float)[valid]
+        a = beam_angles(scan, mount)[valid]
+        px, py = mount[0] + r * np.cos(a), mount[1] + r * np.sin(a)
+        c, s = np.cos(th), np.sin(th)
+        wx, wy = x + c * px - s * py, y + s * px + c * py
+        cells.append(np.floor(np.stack([wx, wy], axis=1) / resolution_m).astype(np.int64))
+    if not cells:
+        return 0
+    return len(np.unique(np.concatenate(cells), axis=0))

@@ -113,6 +113,9 @@ def _points(v: Any, name: str, max_n: int = 4096) -> tuple[tuple[float, float], 
     return tuple(_xy(p, name) for p in v)
 
 
+MAX_STATUS_PATH_POINTS = 64  # a robot status carries at most this many path points
+
+
 # --- messages ----------------------------------------------------------------------------
 
 
@@ -279,9 +282,10 @@ class RobotStatus(Message):
     map_version: int = 0
     bytes_sent: int = 0  # map deltas, map replies, poses and status so far
     distance_m: float = 0.0  # travelled, by odometry
+    path: tuple[tuple[float, float], ...] = ()  # the rest of the planned path (for views)
 
     def body(self) -> dict:
-        return {
+        out = {
             "state": str(self.state),
             "target": self.target,
             "detail": self.detail,
@@ -290,6 +294,9 @@ class RobotStatus(Message):
             "bytes": self.bytes_sent,
             "dist": self.distance_m,
         }
+        if self.path:  # absent when the robot has none
+            out["path"] = [list(p) for p in self.path]
+        return out
 
     @classmethod
     def from_body(cls, b: dict) -> RobotStatus:
@@ -301,6 +308,7 @@ class RobotStatus(Message):
             _int(b.get("ver", 0), "ver", 0),
             _int(b.get("bytes", 0), "bytes", 0),
             _num(b.get("dist", 0.0), "dist", 0.0),
+            _points(b.get("path", ()), "path", MAX_STATUS_PATH_POINTS),
         )
 
 

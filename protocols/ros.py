@@ -22,8 +22,11 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 TWIST = "geometry_msgs/msg/Twist"
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 GRID_UPDATE = "map_msgs/msg/OccupancyGridUpdate"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 MAX_ODOM_VALUE = 1e6  # metres, m/s, rad/s: anything larger is not a robot's odometry
 MAX_CDR_BYTES = 16 * 1024 * 1024  # an incoming ROS message larger than this is refused
+MAX_SWEEP_S = 1.0  # a scan's beams spread over longer than this: its timing is not trusted
 
 _GRID_UPDATE_MSG = """
 std_msgs/Header header
@@ -70,46 +73,96 @@ def _deserialize(data: bytes, typename: str):
 
 def decode_laserscan(data: bytes) -> LaserScan:
     """A sensor_msgs/LaserScan (CDR) as a LaserScan; ProtocolError on any defect."""
+    return laserscan_from_msg(_deserialize(data, LASER_SCAN))
+
+
+def decode_laserscan_framed(data: bytes) -> tuple[LaserScan, str]:
+    """A LaserScan (CDR) and its header's frame id."""
     m = _deserialize(data, LASER_SCAN)
+    return laserscan_from_msg(m), str(m.header.frame_id)
+
+
+def decode_odometry_framed(data: bytes):
+    """``decode_odometry`` and the odometry's child frame id (the robot's base frame)."""
+    m = _deserialize(data, ODOMETRY)
+    return (*odometry_from_msg(m), str(m.child_frame_id))
+
+
+def decode_tf(data: bytes):
+    """A tf2_msgs/TFMessage (CDR), as the deserialized message."""
+    m = _deserialize(data, TF_MESSAGE)
+    for tr in m.transforms:  # every field a transform needs, or a ProtocolError now
+        vals = (*(getattr(tr.transform.translation, a) for a in "xyz"),)
+        vals += tuple(getattr(tr.transform.rotation, a) for a in "xyzw")
+        if not all(math.isfinite(float(v)) for v in vals):
+            raise ProtocolError("TFMessage with a non-finite transform")
+    return m
+
+
+def laserscan_from_msg(m) -> LaserScan:
+    """A LaserScan message (CDR-decoded, or from a bag of either ROS) as a LaserScan.
+
+    Beams may run clockwise (``angle_increment < 0``); invalid returns may read inf, NaN,
+    0 or beyond ``range_max``, as drivers emit them (``polyswarm.scan.classify`` sorts
+    them out). ``time_increment`` is kept for de-skewing when it describes a sweep of at
+    most ``MAX_SWEEP_S``; otherwise the beams count as taken at once."""
     try:
         with np.errstate(invalid="ignore"):  # NaN beams are legal (invalid returns)
             ranges = np.asarray(m.ranges, dtype=float).reshape(-1)
-    except (TypeError, ValueError) as e:
-        raise ProtocolError(f"LaserScan ranges: {e}") from None
+        vals = tuple(float(v) for v in (m.angle_min, m.angle_increment, m.range_min, m.range_max))
+        dt, period = float(m.time_increment), float(m.scan_time)
+        stamp = _stamp(m.header)
+    except (AttributeError, TypeError, ValueError) as e:
+        raise ProtocolError(f"LaserScan: {e}") from None
     if not 2 <= len(ranges) <= MAX_BEAMS:
         raise ProtocolError(f"LaserScan with {len(ranges)} beams")
-    vals = (m.angle_min, m.angle_increment, m.range_min, m.range_max)
-    if not all(math.isfinite(v) for v in vals) or m.angle_increment == 0:
+    if not all(math.isfinite(v) for v in vals) or vals[1] == 0:
         raise ProtocolError("LaserScan with non-finite or zero angles or limits")
-    if not 0 <= m.range_min < m.range_max:
-        raise ProtocolError(f"LaserScan range limits {m.range_min}..{m.range_max}")
-    if abs(m.angle_increment) * (len(ranges) - 1) > 2 * math.pi + 1e-3:
+    if not 0 <= vals[2] < vals[3]:
+        raise ProtocolError(f"LaserScan range limits {vals[2]}..{vals[3]}")
+    if abs(vals[1]) * (len(ranges) - 1) > 2 * math.pi + 1e-3:
         raise ProtocolError("LaserScan covers more than a full turn")
     if (ranges[np.isfinite(ranges)] < 0).any():
         raise ProtocolError("LaserScan with negative ranges")
+    if not (math.isfinite(dt) and 0 <= dt * (len(ranges) - 1) <= MAX_SWEEP_S):
+        dt = 0.0
     return LaserScan(
         ranges,
-        float(m.angle_min),
-        float(m.angle_increment),
-        float(m.range_min),
-        float(m.range_max),
-        _stamp(m.header),
+        vals[0],
+        vals[1],
+        vals[2],
+        vals[3],
+        stamp,
+        dt,
+        period if math.isfinite(period) and period > 0 else 0.0,
     )
 
 
 def decode_odometry(data: bytes) -> tuple[float, np.ndarray, tuple[float, float]]:
     """A nav_msgs/Odometry (CDR): stamp (s), pose (x, y, yaw) and (v, w)."""
-    m = _deserialize(data, ODOMETRY)
-    p, q = m.pose.pose.position, m.pose.pose.orientation
-    vals = (p.x, p.y, q.x, q.y, q.z, q.w, m.twist.twist.linear.x, m.twist.twist.angular.z)
+    return odometry_from_msg(_deserialize(data, ODOMETRY))
+
+
+def odometry_from_msg(m) -> tuple[float, np.ndarray, tuple[float, float]]:
+    """An Odometry message: stamp (s), pose (x, y, yaw) and (v, w); ProtocolError on any
+    defect."""
+    try:
+        p, q = m.pose.pose.position, m.pose.pose.orientation
+        vals = tuple(
+            float(v)
+            for v in (p.x, p.y, q.x, q.y, q.z, q.w, m.twist.twist.linear.x, m.twist.twist.angular.z)
+        )
+        stamp = _stamp(m.header)
+    except (AttributeError, TypeError, ValueError) as e:
+        raise ProtocolError(f"Odometry: {e}") from None
     if not all(math.isfinite(v) and abs(v) <= MAX_ODOM_VALUE for v in vals):
         raise ProtocolError(f"Odometry with non-finite or values beyond {MAX_ODOM_VALUE:g}")
-    norm = math.hypot(q.x, q.y, q.z, q.w)
+    x, y, qx, qy, qz, qw, v, w = vals
+    norm = math.hypot(qx, qy, qz, qw)
     if not 0.5 < norm < 1.5:
         raise ProtocolError(f"Odometry orientation is not a unit quaternion (norm {norm:.3f})")
-    yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y**2 + q.z**2))
-    pose = np.array([p.x, p.y, wrap(yaw)])
-    return _stamp(m.header), pose, (float(m.twist.twist.linear.x), float(m.twist.twist.angular.z))
+    yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy**2 + qz**2))
+    return stamp, np.array([x, y, wrap(yaw)]), (v, w)
 
 
 # --- encoding --------------------------------------------------------------------------------
@@ -136,8 +189,8 @@ def encode_laserscan(scan: LaserScan, frame: str = "laser") -> bytes:
         angle_min=scan.angle_min,
         angle_max=scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1),
         angle_increment=scan.angle_increment,
-        time_increment=0.0,
-        scan_time=0.1,
+        time_increment=scan.time_increment,
+        scan_time=scan.scan_time or 0.1,
         range_min=scan.range_min,
         range_max=scan.range_max,
         ranges=np.asarray(scan.ranges, dtype=np.float32),

@@ -41,7 +41,7 @@ def _mutate(rng: random.Random, data: bytes) -> bytes:
 def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
     """Decoder and valid seeds per kind of outside data."""
     from polyswarm.scan import LaserScan
-    from protocols import ros
+    from protocols import rmw_zenoh, ros
     from protocols.golden.make_golden import golden_maps, golden_messages
     from protocols.mapcodec import (
         decode_any_map,
@@ -63,7 +63,30 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
         "ros-laserscan": (ros.decode_laserscan, [ros.encode_laserscan(scan)]),
         "ros-odometry": (ros.decode_odometry, [ros.encode_odometry(1.0, (1.0, 2.0, 0.5))]),
         "ros-twist": (ros.decode_twist, [ros.encode_twist(0.2, -0.4)]),
+        "ros-tf": (ros.decode_tf, [_tf_seed()]),
+        "rmw_zenoh-attachment": (
+            rmw_zenoh.decode_attachment,
+            [rmw_zenoh.encode_attachment(3, 1_700_000_000_000_000_000, bytes(range(16)))],
+        ),
     }
+
+
+def _tf_seed() -> bytes:
+    from protocols import ros
+
+    ts = ros.typestore()
+    T = ts.types
+    tr = T["geometry_msgs/msg/TransformStamped"](
+        header=T["std_msgs/msg/Header"](
+            stamp=T["builtin_interfaces/msg/Time"](sec=1, nanosec=0), frame_id="base_link"
+        ),
+        child_frame_id="laser",
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=T["geometry_msgs/msg/Vector3"](x=0.1, y=0.0, z=0.2),
+            rotation=T["geometry_msgs/msg/Quaternion"](x=1.0, y=0.0, z=0.0, w=0.0),
+        ),
+    )
+    return bytes(ts.serialize_cdr(T[ros.TF_MESSAGE](transforms=[tr]), ros.TF_MESSAGE))
 
 
 def run(count: int, seed: int = 0, progress=None) -> dict:

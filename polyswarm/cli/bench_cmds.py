@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import typer
@@ -138,6 +139,84 @@ def bench_sim(
         ("peak memory", f"{res['peak_memory_mb']:.0f} MB"),
     ]
     _emit(res, as_json, f"simulator on {res['world']} ({res['beams']} beams)", rows)
+
+
+@bench_app.command("bags")
+def bench_bags(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    shared: bool = typer.Option(True, help="Also the shared TurtleBot3 bag (../shared/data)."),
+) -> None:
+    """ROS bags through polyswarm slam (speed, sharpness, mount from tf) and agent replay."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import bags
+
+    shared_bag = None
+    if shared:
+        from polyswarm.data import shared_data_dir
+
+        shared_bag = shared_data_dir() / "bags" / "turtlebot3-gazebo.bag"
+    with Console(stderr=True).status("bags through slam and agent replay"):
+        res = bags.run(shared_bag)
+    _save(save, res)
+    rows = []
+    for name, r in res["bags"].items():
+        s, p = r["slam"], r["replay"]
+        rows += [
+            (f"{name}: scans, bag seconds", f"{s['scans']}, {s['duration_s']:.0f} s"),
+            (f"{name}: slam faster than real time", f"{s['realtime_factor']:.1f} x"),
+            (
+                f"{name}: occupied 5 cm cells (odometry alone)",
+                f"{s['occupied_cells_5cm']} ({s['odometry_occupied_cells_5cm']})",
+            ),
+            (f"{name}: mount from", s["mount"]),
+            (
+                f"{name}: agent replay at {p['rate']:g}x: scans, refused",
+                f"{p['scans']}, {p['refused']}",
+            ),
+        ]
+        if "mount_error_m" in s:
+            rows.append(
+                (
+                    f"{name}: mount error",
+                    f"{s['mount_error_m'] * 1000:.1f} mm, {math.degrees(s['mount_error_rad']):.2f} "
+                    f"deg, upside down {'right' if s['mount_upside_down_matches'] else 'wrong'}",
+                )
+            )
+    _emit(res, as_json, "ROS bags", rows)
+
+
+@bench_app.command("view")
+def bench_view(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    robots: int = typer.Option(10, min=1, help="Robots."),
+    world: str = typer.Option("data:maze", help="World to explore."),
+    duration: float = typer.Option(120.0, help="Wall-clock seconds of each of the two runs."),
+) -> None:
+    """The live view: display latency, its CPU, the coordinator with and without it."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import view
+
+    with Console(stderr=True).status(f"two {duration:.0f} s runs of {robots} robots"):
+        res = view.run(robots, world, duration)
+    _save(save, res)
+    a, b = res["without_view"], res["with_view"]
+
+    def ms(v):
+        return "-" if v is None else f"{v:.0f} ms"
+
+    rows = [
+        ("display latency p95 (publication to page)", ms(res["display_latency_p95_ms"])),
+        ("view process, share of one core", f"{100 * (res['view_cpu_share'] or 0):.1f} %"),
+        (
+            "coordinator cycle p95 without / with the view",
+            f"{ms(a['coordinator_cycle_p95_ms'])} / {ms(b['coordinator_cycle_p95_ms'])}",
+        ),
+    ]
+    _emit(res, as_json, f"live view: {robots} robots on {world}", rows)
 
 
 @bench_app.command("slam")

@@ -38,7 +38,15 @@ def agent_cmd(
     ),
     duration: float = typer.Option(0.0, help="Stop after this many wall seconds (0: run)."),
     replay: Path | None = typer.Option(
-        None, help="Feed this CARMEN log (.log or .log.gz) instead of live sensors."
+        None,
+        help="Feed this CARMEN log (.log or .log.gz) or ROS bag (ROS 1 .bag; rosbag2 "
+        "folder, .mcap or .db3) instead of live sensors.",
+    ),
+    scan_topic: str | None = typer.Option(
+        None, help="--replay of a bag: its sensor_msgs/LaserScan topic (default: the only one)."
+    ),
+    odom_topic: str | None = typer.Option(
+        None, help="--replay of a bag: its nav_msgs/Odometry topic (default: the only one)."
     ),
     rate: float = typer.Option(
         1.0, help="Replay speed: log seconds per wall second (0: as fast as the agent runs)."
@@ -68,13 +76,23 @@ def agent_cmd(
     stop = stop_on_signals()
     player = None
     if replay is not None:
-        from polyswarm.runners.replay import LogPlayer, start_player
+        from polyswarm.runners.replay import BagPlayer, LogPlayer, start_player
+        from protocols.bags import choose_mount, is_bag
 
-        player = LogPlayer(replay, rate)
-        # the log's scans arrive as native messages; commands carry the acknowledgements
-        cfg = dataclasses.replace(
-            cfg, agent=dataclasses.replace(cfg.agent, source="native", output="native")
-        )
+        if is_bag(replay):
+            # the bag's messages arrive as ROS 2 CDR, as from a robot through the bridge
+            io = dataclasses.replace(cfg.agent, source="ros2", output="native")
+            player = BagPlayer(replay, io, rate, scan_topic, odom_topic)
+            mount, _ = choose_mount(cfg.slam.mount, player.bag.mount, str(replay))
+            cfg = dataclasses.replace(
+                cfg, agent=io, slam=dataclasses.replace(cfg.slam, mount=mount)
+            )
+        else:
+            player = LogPlayer(replay, rate)
+            # the log's scans arrive as native messages; commands carry the acknowledgements
+            cfg = dataclasses.replace(
+                cfg, agent=dataclasses.replace(cfg.agent, source="native", output="native")
+            )
         me = SwarmKeys(cfg.comms.swarm).robot(robot_id)
 
         def attach(session, agent, stop_event):
@@ -126,10 +144,50 @@ def agent_cmd(
     s = agent.stats
     typer.echo(
         f"{robot_id}: {s.scans} scans, {s.keyframes} keyframes, {s.distance_m:.1f} m, "
-        f"{agent.bytes_sent} bytes sent",
+        f"{agent.bytes_sent} bytes sent, {s.refused} messages refused",
         err=True,
     )
     exit_now()  # state saved, session closed: no slow teardown
+
+
+@app.command("view")
+def view_cmd(
+    connect: str | None = typer.Option(
+        None, help="Zenoh router to connect to, e.g. tcp/10.0.0.5:7447 (default: comms.endpoint)."
+    ),
+    config: Path | None = CONFIG_OPT,
+    swarm: str | None = typer.Option(None, help="Swarm name (default: comms.swarm)."),
+    zenoh_config: Path | None = typer.Option(None, help=ZENOH_HELP),
+    host: str = typer.Option("127.0.0.1", help="Address the web page is served on."),
+    port: int = typer.Option(8000, min=0, max=65535, help="Port of the web page."),
+    stats: Path | None = typer.Option(
+        None, help="Write the view's figures here at exit (JSON: display latency, CPU)."
+    ),
+) -> None:
+    """The mission live in a browser: merged map, robots, targets, paths (only listens)."""
+    import json
+
+    from agents.session import SessionSpec, stop_on_signals
+    from agents.view import serve
+    from polyswarm.config import load_config
+
+    cfg = load_config(config)
+    zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
+    spec = SessionSpec.client(connect or cfg.comms.endpoint, zconf)
+    typer.echo(f"polyswarm view: http://{host}:{port}/", err=True)
+    state = serve(
+        spec, swarm or cfg.comms.swarm, host, port, cfg.nav.robot_radius_m, stop_on_signals()
+    )
+    figures = state.figures()
+    if stats is not None:
+        stats.write_text(json.dumps(figures, indent=2))
+    p95 = figures["display_latency_p95_ms"]
+    shown = f", display latency p95 {p95:.0f} ms" if p95 is not None else ""
+    typer.echo(
+        f"view: {figures['deltas']} merged deltas, {figures['fetches']} map fetches{shown}, "
+        f"{100 * figures['cpu_share']:.1f} % of a core",
+        err=True,
+    )
 
 
 @app.command("coordinator")
@@ -200,6 +258,13 @@ def launch_cmd(
         help="Lose, duplicate and reorder received messages at the coordinator and agents "
         "(probabilities), e.g. drop=0.1,dup=0.05,reorder=0.05.",
     ),
+    view_port: int | None = typer.Option(
+        None,
+        "--view",
+        min=0,
+        max=65535,
+        help="Also serve the live view in a browser on this port of 127.0.0.1 (polyswarm view).",
+    ),
 ) -> None:
     """Explore a simulated world with N robots: coordinator, sim and agents as processes.
 
@@ -235,8 +300,11 @@ def launch_cmd(
         load_cfg(config, profile),
         faults=Fault.parse_many(fault),
         link_faults=link_faults,
+        view_port=view_port,
     )
     console = Console(stderr=True)
+    if view_port is not None:
+        console.print(f"live view: http://127.0.0.1:{view_port}/")
 
     def view(obs, wall: float) -> Table:
         cov = obs.coverage[-1][1] if obs.coverage else 0.0

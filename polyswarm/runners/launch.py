@@ -58,6 +58,7 @@ log = logging.getLogger(__name__)
 
 STACK_DUMP_S = 0.2  # a child that did not stop gets this long to write its stack
 SHUTDOWN_S = 4.0  # children get this long to exit after SIGTERM before SIGKILL
+VIEW = "view"  # the live view: its exit does not end the mission
 HUB = ("coordinator", "router")  # stopped last, so they receive what the robots sent last
 HUB_SHUTDOWN_S = 1.5  # ... and given this much of SHUTDOWN_S (writing the coordinator's
 #                       state is appending to its journal, not rewriting maps)
@@ -118,6 +119,7 @@ class LaunchOptions:
     # robots' own computers, and ten of them must not starve the coordinator and router
     # (the fleet's shared machine); 0 runs everything at the same priority
     robots_nice: int = 5
+    view_port: int | None = None  # also run ``polyswarm view`` serving on this port
 
 
 @dataclass
@@ -475,6 +477,10 @@ def launch(
         for rid in ids:
             agent_args = ["agent", "--id", rid, "--config", conf]
             children.append(_spawn(rid, agent_args, logs, opts.verbose, faulty, nice))
+        if opts.view_port is not None:
+            view_args = ["view", "--config", conf, "--connect", cfg.comms.endpoint]
+            view_args += ["--port", str(opts.view_port), "--stats", str(logs / "view.json")]
+            children.append(_spawn(VIEW, view_args, logs, False))
         with open_session(SessionSpec.client(cfg.comms.endpoint)) as session:
             bus = Bus(session, "observer")
             try:
@@ -550,7 +556,11 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0) -> str:
                 faulted.add(fault.target)
             elif fault.action == FaultAction.RESTART:
                 faulted.discard(fault.target)
-        dead = [c.name for c in children if c.proc.poll() is not None and c.name not in faulted]
+        dead = [
+            c.name
+            for c in children
+            if c.proc.poll() is not None and c.name not in faulted and c.name != VIEW
+        ]
         if dead:
             return f"process exited: {', '.join(dead)}"
         if obs.mission == MissionState.DONE:

@@ -19,6 +19,7 @@ import numpy as np
 
 from polyswarm import evaluation as ev
 from polyswarm.config import Config, config_to_dict, save_config, with_overrides
+from polyswarm.errors import DataFormatError
 from polyswarm.io.carmen import read_carmen, real_odometry
 from polyswarm.io.tum import write_tum
 from polyswarm.odometry import IncrementNoise, OdometryBuffer, noisy_odometry
@@ -35,7 +36,8 @@ class SlamRun:
     name: str
     stamps: np.ndarray
     estimate: np.ndarray  # every scan's pose after all pose-graph corrections
-    reference: np.ndarray  # ground truth (simulation) or the log's corrected poses
+    reference: np.ndarray | None  # ground truth (simulation), a log's corrected poses, None
+
     odometry: np.ndarray  # the noisy odometry the SLAM consumed, in the map frame
     slam: PolySlam
     keyframe_ms: list[float]
@@ -127,6 +129,89 @@ def run_log(
         final_map=final_map,
         stage_ms=stages,
     )
+
+
+MAX_ODOM_GAP_S = 0.5  # a scan farther than this from any odometry reading is skipped
+
+
+def run_bag(
+    path: str | Path,
+    cfg: Config,
+    progress: Progress | None = None,
+    scan_topic: str | None = None,
+    odom_topic: str | None = None,
+) -> tuple[SlamRun, Config]:
+    """PolySLAM over a recorded ROS bag (ROS 1, or rosbag2 in mcap or sqlite3): its scans
+    with its wheel odometry at each scan's time, each sweep de-skewed; the lidar's mount
+    from ``/tf_static`` unless the config sets one. No ground truth: the run is judged by
+    the sharpness of its map against odometry alone (``evaluation.occupied_cells``).
+    Returns the run and the config it used (with the mount)."""
+    from protocols.bags import choose_mount, read_bag
+
+    bag = read_bag(path, scan_topic, odom_topic)
+    mount, mount_from = choose_mount(cfg.slam.mount, bag.mount, bag.path)
+    cfg = with_overrides(cfg, {"slam": {"mount": config_to_dict(mount)}})
+    odometry = OdometryBuffer(capacity=len(bag.odometry) + 1)
+    for t, x, y, th in bag.odometry:
+        odometry.add(t, (x, y, th))
+    t_first, t_last = bag.odometry[0, 0], bag.odometry[-1, 0]
+    scans = [
+        s
+        for s in bag.scans
+        if t_first - MAX_ODOM_GAP_S <= s.stamp and s.end_stamp <= t_last + MAX_ODOM_GAP_S
+    ]
+    if len(scans) < len(bag.scans):
+        bag.skipped["scans outside the odometry's time"] += len(bag.scans) - len(scans)
+    if not scans:
+        raise DataFormatError(f"{bag.path}: no scan lies within the odometry's time")
+    start = odometry.at(scans[0].end_stamp)
+    slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=start, keep_trajectory=True)
+    est, odo, kf_ms, stages = [], [], [], []
+    spent = 0.0
+    for k, scan in enumerate(scans):
+        t0 = time.perf_counter()
+        pose = odometry.at(scan.end_stamp)
+        step = slam.process(scan, pose, deskew_motion(scan, odometry.at_many))
+        spent += time.perf_counter() - t0
+        est.append(step.pose)
+        odo.append(pose)
+        if step.keyframe:
+            kf_ms.append(step.timings_ms["total"])
+            stages.append(step.timings_ms)
+        if progress:
+            progress(k + 1, len(scans))
+    final, final_map, rebuild_s = finish(slam)
+    stamps = np.array([s.end_stamp for s in scans])
+    m = cfg.slam.mount
+    mount_t = (m.x_m, m.y_m, m.yaw_rad, m.upside_down)
+    info = {
+        "bag": str(path),
+        "scan_topic": bag.scan_topic,
+        "odom_topic": bag.odom_topic,
+        "scans": len(scans),
+        "skipped": dict(bag.skipped),
+        "mount": mount_from,
+        "odometry": "the bag's wheel odometry",
+        "occupied_cells_5cm": ev.occupied_cells(scans, final, mount_t),
+        "odometry_occupied_cells_5cm": ev.occupied_cells(scans, np.array(odo), mount_t),
+    }
+    run = SlamRun(
+        Path(path).name.split(".")[0],
+        stamps,
+        final,
+        None,
+        np.array(odo),
+        slam,
+        kf_ms,
+        spent + rebuild_s,
+        float(stamps[-1] - stamps[0]) if len(stamps) > 1 else 0.0,
+        False,
+        info,
+        online=np.array(est),
+        final_map=final_map,
+        stage_ms=stages,
+    )
+    return run, cfg
 
 
 def run_world(
@@ -228,29 +313,15 @@ def stage_percentiles(stage_ms: list[dict[str, float]]) -> dict[str, dict[str, f
 
 
 def metrics(run: SlamRun) -> dict:
-    est, ref = run.estimate, run.reference
-    t_max, r_max = ev.max_errors(est, ref)
-    dist = float(ev.travelled(ref)[-1])
-    r1, r10 = ev.rpe(est, ref, 1.0), ev.rpe(est, ref, 10.0)
     kf = np.array(run.keyframe_ms) if run.keyframe_ms else np.array([math.nan])
-    out = {
-        "ate_rmse_m": ev.ate_rmse(est, ref),
-        # the poses as they were estimated scan by scan, before later loop corrections
-        "ate_rmse_online_m": ev.ate_rmse(run.online, ref) if run.online is not None else None,
+    out = {} if run.reference is None else _trajectory_errors(run)
+    out |= {
         "loops_closed": run.slam.loops_closed,
         "reseeded_keyframes": run.slam.reseeded,
         "map_rebuilt_at_optimised_poses": run.final_map is not None,
-        "odometry_ate_rmse_m": ev.ate_rmse(run.odometry, ref),
-        "rpe_1m_trans_mean_m": r1["trans_mean_m"],
-        "rpe_1m_trans_std_m": r1["trans_std_m"],
-        "rpe_1m_rot_mean_deg": r1["rot_mean_deg"],
-        "rpe_10m_trans_mean_m": r10["trans_mean_m"],
-        "rpe_10m_trans_std_m": r10["trans_std_m"],
-        "rpe_10m_rot_mean_deg": r10["rot_mean_deg"],
-        "max_trans_error_m": t_max,
-        "max_rot_error_deg": r_max,
-        "distance_travelled_m": dist,
-        "max_trans_error_ratio": t_max / dist if dist > 0 else math.nan,
+        "distance_travelled_m": float(
+            ev.travelled(run.estimate if run.reference is None else run.reference)[-1]
+        ),
         "vectors": int(sum(run.map.vector_counts().values())),
         "vectors_by_type": run.map.vector_counts(),
         "polygons": run.map.polygon_count(),
@@ -274,6 +345,28 @@ def metrics(run: SlamRun) -> dict:
     return out
 
 
+def _trajectory_errors(run: SlamRun) -> dict:
+    est, ref = run.estimate, run.reference
+    t_max, r_max = ev.max_errors(est, ref)
+    dist = float(ev.travelled(ref)[-1])
+    r1, r10 = ev.rpe(est, ref, 1.0), ev.rpe(est, ref, 10.0)
+    return {
+        "ate_rmse_m": ev.ate_rmse(est, ref),
+        # the poses as they were estimated scan by scan, before later loop corrections
+        "ate_rmse_online_m": ev.ate_rmse(run.online, ref) if run.online is not None else None,
+        "odometry_ate_rmse_m": ev.ate_rmse(run.odometry, ref),
+        "rpe_1m_trans_mean_m": r1["trans_mean_m"],
+        "rpe_1m_trans_std_m": r1["trans_std_m"],
+        "rpe_1m_rot_mean_deg": r1["rot_mean_deg"],
+        "rpe_10m_trans_mean_m": r10["trans_mean_m"],
+        "rpe_10m_trans_std_m": r10["trans_std_m"],
+        "rpe_10m_rot_mean_deg": r10["rot_mean_deg"],
+        "max_trans_error_m": t_max,
+        "max_rot_error_deg": r_max,
+        "max_trans_error_ratio": t_max / dist if dist > 0 else math.nan,
+    }
+
+
 def write_outputs(run: SlamRun, out: str | Path, cfg: Config) -> dict:
     from polyswarm.io.export import export_map
     from protocols.files import write_polymap
@@ -285,9 +378,9 @@ def write_outputs(run: SlamRun, out: str | Path, cfg: Config) -> dict:
     export_map(run.map, out / "map.svg", trajectories=[run.estimate[:, :2]])
     export_map(run.map, out / "map.png", trajectories=[run.estimate[:, :2]])
     write_tum(out / "trajectory.tum", run.stamps, run.estimate)
-    write_tum(
-        out / ("ground_truth.tum" if run.simulated else "reference.tum"), run.stamps, run.reference
-    )
+    if run.reference is not None:
+        name = "ground_truth.tum" if run.simulated else "reference.tum"
+        write_tum(out / name, run.stamps, run.reference)
     write_tum(out / "odometry.tum", run.stamps, run.odometry)
     save_config(cfg, out / "config.toml")
     (out / "metrics.json").write_text(json.dumps(m, indent=2, default=float))

@@ -1,0 +1,181 @@
+"""Recorded bags for tests and benchmarks: a robot circling a pillar in a room, its lidar
+upside down.
+
+The room is 8 x 6 m with a 1 x 1 m pillar in the middle; the robot drives a circle of
+2 m radius around the pillar. The lidar sits 0.1 m ahead of base_link and is mounted
+upside down (a roll of pi), so its beams run clockwise seen from above; /tf_static
+says so through base_footprint -> base_link -> laser. Ranges are exact (ray casting),
+odometry carries a small heading drift, so SLAM has something to correct.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+ROOM = [((0, 0), (8, 0)), ((8, 0), (8, 6)), ((8, 6), (0, 6)), ((0, 6), (0, 0))]
+PILLAR = [((3.5, 2.5), (4.5, 2.5)), ((4.5, 2.5), (4.5, 3.5)), ((4.5, 3.5), (3.5, 3.5))]
+PILLAR += [((3.5, 3.5), (3.5, 2.5))]
+MOUNT = (0.1, 0.0, 0.0, True)  # x, y (m), yaw (rad), upside down
+BEAMS = 360
+RANGE_MAX_M = 6.0
+
+
+def ray_cast(origin, angles: np.ndarray) -> np.ndarray:
+    """Distance along each ray (world angles) to the nearest wall; inf when none."""
+    segs = np.array(ROOM + PILLAR, dtype=float)
+    a, b = segs[:, 0], segs[:, 1]
+    d = np.stack([np.cos(angles), np.sin(angles)], axis=1)[:, None, :]
+    e = (b - a)[None, :, :]
+    w = (a - np.asarray(origin))[None, :, :]
+    den = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / den
+        u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / den
+    ok = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+    return np.where(ok, t, np.inf).min(axis=1)
+
+
+def trajectory(n_scans: int, rate_hz: float = 10.0):
+    """(stamps, true poses) of the circle, one per scan."""
+    t = np.arange(n_scans) / rate_hz
+    phi = 2 * math.pi * t / 40.0  # one lap in 40 s: 0.31 m/s
+    x, y = 4 + 2 * np.cos(phi), 3 + 2 * np.sin(phi)
+    return t + 100.0, np.stack([x, y, phi + math.pi / 2], axis=1)
+
+
+def make_bag(
+    path: Path,
+    kind: str = "mcap",
+    n_scans: int = 200,
+    topics=("/scan", "/odom", "/tf_static"),
+    defects: bool = False,
+) -> Path:
+    """Write the bag: ``kind`` 'mcap' or 'sqlite3' (rosbag2) or 'ros1'. ``defects``: scan
+    10 has no beams, odometry 20 comes twice, scans 30 and 31 are recorded in the wrong
+    order of their stamps."""
+    from rosbags.typesys import Stores, get_typestore
+
+    ros1 = kind == "ros1"
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if "tf2_msgs/msg/TFMessage" not in store.types:
+        from rosbags.typesys import get_types_from_msg
+
+        defn = "geometry_msgs/TransformStamped[] transforms"
+        store.register(get_types_from_msg(defn, "tf2_msgs/msg/TFMessage"))
+    T = store.types
+    stamps, poses = trajectory(n_scans)
+    odo = poses.copy()
+    odo[:, 2] += 0.002 * np.arange(n_scans)  # heading drift: 0.02 rad/s
+    mx, my, myaw, _ = MOUNT
+    inc = -2 * math.pi / BEAMS  # upside down: the sensor's angles run clockwise
+    angle_min = math.pi - 1e-6
+
+    def header(t: float, frame: str):
+        sec = math.floor(t)
+        stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int((t - sec) * 1e9))
+        if ros1:
+            return T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+
+    def transform(parent, child, xyz, quat):
+        return T["geometry_msgs/msg/TransformStamped"](
+            header=header(stamps[0], parent),
+            child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=xyz[0], y=xyz[1], z=xyz[2]),
+                rotation=T["geometry_msgs/msg/Quaternion"](
+                    x=quat[0], y=quat[1], z=quat[2], w=quat[3]
+                ),
+            ),
+        )
+
+    def scan_msg(k: int):
+        x, y, th = poses[k]
+        sx, sy = (
+            x + mx * math.cos(th) - my * math.sin(th),
+            y + mx * math.sin(th) + my * math.cos(th),
+        )
+        sensor = angle_min + inc * np.arange(BEAMS)
+        world = th + myaw - sensor  # upside down: a sensor angle points the other way
+        r = ray_cast((sx, sy), world)
+        r = np.where(r <= RANGE_MAX_M, r, np.inf).astype(np.float32)
+        return T["sensor_msgs/msg/LaserScan"](
+            header=header(stamps[k], "laser"),
+            angle_min=angle_min,
+            angle_max=angle_min + inc * (BEAMS - 1),
+            angle_increment=inc,
+            time_increment=0.0,
+            scan_time=0.1,
+            range_min=0.12,
+            range_max=RANGE_MAX_M,
+            ranges=r,
+            intensities=np.zeros(0, dtype=np.float32),
+        )
+
+    def odom_msg(k: int):
+        x, y, th = odo[k]
+        cov = np.zeros(36)
+        return T["nav_msgs/msg/Odometry"](
+            header=header(stamps[k], "odom"),
+            child_frame_id="base_footprint",
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                pose=T["geometry_msgs/msg/Pose"](
+                    position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                    orientation=T["geometry_msgs/msg/Quaternion"](
+                        x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)
+                    ),
+                ),
+                covariance=cov,
+            ),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=T["geometry_msgs/msg/Twist"](
+                    linear=T["geometry_msgs/msg/Vector3"](x=0.31, y=0.0, z=0.0),
+                    angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.157),
+                ),
+                covariance=cov.copy(),
+            ),
+        )
+
+    tf = T["tf2_msgs/msg/TFMessage"](
+        transforms=[
+            transform("base_footprint", "base_link", (0.0, 0.0, 0.05), (0.0, 0.0, 0.0, 1.0)),
+            transform("base_link", "laser", (mx, my, 0.2), (1.0, 0.0, 0.0, 0.0)),  # roll pi
+        ]
+    )
+    messages = [(int(stamps[0] * 1e9) - 1, "/tf_static", "tf2_msgs/msg/TFMessage", tf)]
+    for k in range(n_scans):
+        ns = int(stamps[k] * 1e9)
+        messages.append((ns, "/odom", "nav_msgs/msg/Odometry", odom_msg(k)))
+        if defects and k == 20:
+            messages.append((ns, "/odom", "nav_msgs/msg/Odometry", odom_msg(k)))
+        scan = scan_msg(31 if defects and k == 30 else 30 if defects and k == 31 else k)
+        if defects and k == 10:
+            scan.ranges = np.zeros(0, dtype=np.float32)
+        messages.append((ns + 1, "/scan", "sensor_msgs/msg/LaserScan", scan))
+    _write(path, kind, store, [m for m in messages if m[1] in topics])
+    return path
+
+
+def _write(path: Path, kind: str, store, messages) -> None:
+    if kind == "ros1":
+        from rosbags.rosbag1 import Writer
+
+        with Writer(path) as w:
+            conns = {}
+            for ns, topic, typ, msg in messages:
+                if topic not in conns:
+                    conns[topic] = w.add_connection(topic, typ, typestore=store)
+                w.write(conns[topic], ns, store.serialize_ros1(msg, typ))
+        return
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=8, storage_plugin=plugin) as w:
+        conns = {}
+        for ns, topic, typ, msg in messages:
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, typ, typestore=store)
+            w.write(conns[topic], ns, store.serialize_cdr(msg, typ))
