@@ -154,6 +154,16 @@ class LaunchResult:
 # --- the observer -------------------------------------------------------------------------------
 
 
+def _clip(geom, bounds):
+    """``geom`` inside the box ``bounds``. GEOS's fast rectangle clip fails on some
+    rings it produces itself (seen on the maze's ground truth: "Invalid number of points
+    in LinearRing found 3", which ended a 10-robot run); the general overlay does not."""
+    try:
+        return shapely.clip_by_rect(geom, *bounds)
+    except shapely.errors.GEOSException:
+        return shapely.intersection(geom, shapely.box(*bounds))
+
+
 class Observer:
     """Follows the exploration from the outside: coverage, states, bytes, trajectories."""
 
@@ -195,9 +205,7 @@ class Observer:
             if cached is None or cached[0] is not cell:
                 truth = self._truth_cells.get(ix)
                 if truth is None:
-                    truth = self._truth_cells[ix] = shapely.clip_by_rect(
-                        self.truth_free, *cell.bounds
-                    )
+                    truth = self._truth_cells[ix] = _clip(self.truth_free, cell.bounds)
                 area = float(shapely.intersection(cell.region, truth).area) if cell.polygons else 0
                 cached = self._cell_cover[ix] = (cell, area)
             total += cached[1]
