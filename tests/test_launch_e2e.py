@@ -145,9 +145,9 @@ def test_sigint_stops_a_background_launch_and_writes_its_outputs(tmp_path):
 
 
 def test_observer_clips_the_mazes_ground_truth_cell_by_cell(tmp_path):
-    """GEOS's rectangle clip fails on 20 cells of the 10-robot maze's reachable free
-    space (it ended a run); the observer's clip falls back to the general overlay, and
-    the cells add up to the whole."""
+    """GEOS's rectangle clip raised on 20 cells of the 10-robot maze's reachable free
+    space (it ended a run) and lost area on another: the observer's cells add up to the
+    whole."""
     import shapely
 
     from polyswarm.runners.launch import LaunchOptions, Observer, _clip, prepare

@@ -155,13 +155,11 @@ class LaunchResult:
 
 
 def _clip(geom, bounds):
-    """``geom`` inside the box ``bounds``. GEOS's fast rectangle clip fails on some
-    rings it produces itself (seen on the maze's ground truth: "Invalid number of points
-    in LinearRing found 3", which ended a 10-robot run); the general overlay does not."""
-    try:
-        return shapely.clip_by_rect(geom, *bounds)
-    except shapely.errors.GEOSException:
-        return shapely.intersection(geom, shapely.box(*bounds))
+    """``geom`` inside the box ``bounds``, by the general overlay. GEOS's fast rectangle
+    clip is not robust here: on the 10-robot maze's reachable free space it raised on 20
+    cells ("Invalid number of points in LinearRing found 3", which ended a run) and gave
+    0.18 m2 for a cell holding 3.82 m2. Each cell is clipped once (cached)."""
+    return shapely.intersection(geom, shapely.box(*bounds))
 
 
 class Observer:
