@@ -59,6 +59,55 @@ def test_agent_killed_and_restarted_resumes_its_map(tmp_path):
     assert_nothing_lost(out)
 
 
+def _kill_from_outside(out, name: str, after_s: float, seen: dict) -> None:
+    """SIGKILL ``name`` by its process id (``logs/pids.json``), as the kernel's
+    out-of-memory killer would: not through launch's fault injection."""
+    import os
+    import signal
+    import time
+
+    pids = out / "logs" / "pids.json"
+    deadline = time.monotonic() + 60
+    while not pids.exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(after_s)
+    pid = json.loads(pids.read_text())[name]
+    os.kill(pid, signal.SIGKILL)
+    seen["pid"] = pid
+
+
+@pytest.mark.parametrize("victim", ["r2", "coordinator"])
+def test_a_process_killed_from_outside_is_restarted_and_the_mission_goes_on(tmp_path, victim):
+    import threading
+
+    seen: dict = {}
+    killer = threading.Thread(
+        target=_kill_from_outside, args=(tmp_path / "run", victim, 5.0, seen), daemon=True
+    )
+    killer.start()
+    m, out = launch(tmp_path, "--world", "office")  # long enough to be killed in (rooms: 5 s)
+    killer.join(timeout=1)
+    assert "pid" in seen, "the process was never killed"
+    assert completed(m), m["stopped_because"]
+    assert m["restarts"] == {victim: 1}
+    pids = json.loads((out / "logs" / "pids.json").read_text())
+    assert pids[victim] != seen["pid"]  # a new process
+    resumed = {"r2": "r2: resumed from", "coordinator": "restored the merged map"}[victim]
+    assert resumed in log_text(out, victim)  # from what it had persisted
+    assert_nothing_lost(out)
+
+
+def test_no_restart_stops_the_mission_when_a_process_dies(tmp_path):
+    import threading
+
+    seen: dict = {}
+    threading.Thread(
+        target=_kill_from_outside, args=(tmp_path / "run", "r1", 5.0, seen), daemon=True
+    ).start()
+    m, _ = launch(tmp_path, "--no-restart", "--world", "office")
+    assert m["stopped_because"] == "process exited: r1 (code -9)" and m["restarts"] == {}
+
+
 def test_coordinator_killed_and_restarted_rebuilds_the_merged_map(tmp_path):
     m, out = launch(tmp_path, "--fault", "kill:coordinator@3,restart:coordinator@6")
     assert completed(m) and m["crashed_processes"] == []

@@ -258,6 +258,11 @@ def launch_cmd(
         help="Lose, duplicate and reorder received messages at the coordinator and agents "
         "(probabilities), e.g. drop=0.1,dup=0.05,reorder=0.05.",
     ),
+    restart: bool = typer.Option(
+        True,
+        help="Restart a process that exits unexpectedly, with backoff, as systemd would on a "
+        "robot (--no-restart: stop the mission instead, for debugging).",
+    ),
     view_port: int | None = typer.Option(
         None,
         "--view",
@@ -301,6 +306,7 @@ def launch_cmd(
         faults=Fault.parse_many(fault),
         link_faults=link_faults,
         view_port=view_port,
+        restart=restart,
     )
     console = Console(stderr=True)
     if view_port is not None:
@@ -349,6 +355,7 @@ def launch_cmd(
         ("bytes sent per robot", ", ".join(f"{b:,}" for b in m["bytes_sent_per_robot"].values())),
         ("wall time", f"{m['wall_time_s']:.0f} s"),
         ("crashed processes", ", ".join(m["crashed_processes"]) or "none"),
+        ("restarted processes", ", ".join(f"{k} x{n}" for k, n in m["restarts"].items()) or "none"),
     ):
         table.add_row(k, v)
     Console().print(table)
