@@ -6,6 +6,7 @@ max_errors(est, ref)               largest translation / rotation error (same fr
 map_iou(explored, truth)           intersection over union of free space
 wall_distance(starts, ends, walls) mean distance of obstacle vectors to true walls
 phantom_obstacles(...)             length of obstacle vectors far from every true wall
+ghost_wall_share(...)              share of a map's walls far from a reference map's
 time_to_coverage(curve, 0.99)      first time a coverage curve reaches a fraction (t99)
 """
 
@@ -105,6 +106,18 @@ def phantom_obstacles(
         return 0.0
     dist, w = _distances_to_walls(starts, ends, wall_starts, wall_ends, step_m)
     return float(np.sum(w[dist > far_m]))
+
+
+def ghost_wall_share(starts, ends, ref_starts, ref_ends, far_m: float = 0.1) -> float:
+    """Share of the length of obstacle vectors ``starts -> ends`` farther than ``far_m``
+    from every reference obstacle vector: walls of a map that the reference map (the
+    same keyframes merged at their final, optimised poses) does not have."""
+    if len(starts) == 0:
+        return 0.0
+    if len(ref_starts) == 0:
+        return 1.0
+    total = float(np.hypot(*(ends - starts).T).sum())
+    return phantom_obstacles(starts, ends, ref_starts, ref_ends, far_m) / total
 
 
 def _distances_to_walls(starts, ends, wall_starts, wall_ends, step_m: float):

@@ -210,3 +210,17 @@ def test_a_log_with_only_the_anchoring_odom_lines_has_no_real_odometry(tmp_path)
     p.write_text("\n".join(lines) + "\n")
     with pytest.raises(DataFormatError, match="no raw ODOM"):
         real_odometry(read_carmen(p))
+
+
+def test_ghost_wall_share_on_walls_drawn_by_hand():
+    import numpy as np
+
+    from polyswarm.evaluation import ghost_wall_share
+
+    live_s = np.array([[0.0, 0.0], [0.0, 1.0]])
+    live_e = np.array([[1.0, 0.0], [1.0, 1.0]])
+    ref_s, ref_e = np.array([[0.0, 0.05]]), np.array([[1.0, 0.05]])
+    # the first wall lies 5 cm from the reference's, the second 95 cm: half is a ghost
+    assert ghost_wall_share(live_s, live_e, ref_s, ref_e, 0.1) == pytest.approx(0.5)
+    assert ghost_wall_share(live_s[:1], live_e[:1], ref_s, ref_e, 0.1) == 0.0
+    assert ghost_wall_share(live_s, live_e, ref_s[:0], ref_e[:0], 0.1) == 1.0

@@ -81,6 +81,8 @@ def _real_odometry(path, cfg: Config, progress) -> dict:
             "ate_rmse_online_m": m["ate_rmse_online_m"],
             "loops_closed": m["loops_closed"],
             "reseeded_keyframes": m["reseeded_keyframes"],
+            "live_vs_rebuilt_iou": m["live_vs_rebuilt_iou"],
+            "ghost_wall_share": m["ghost_wall_share"],
         }
     }
 
@@ -114,6 +116,9 @@ def run(progress: Callable[[str], None] | None = None, worlds=WORLDS, log_seeds:
             "thesis_polygons": THESIS_POLYGONS.get(w),
             "route_finished": m["route_finished"],
             "realtime_factor": m["realtime_factor"],
+            "loops_closed": m["loops_closed"],
+            "live_vs_rebuilt_iou": m["live_vs_rebuilt_iou"],
+            "ghost_wall_share": m["ghost_wall_share"],
         }
     world_kf_ms = list(kf_ms)  # 720-beam scans, the speed target's
     for p in log_paths():
@@ -139,6 +144,8 @@ def run(progress: Callable[[str], None] | None = None, worlds=WORLDS, log_seeds:
             "rpe_1m_trans_mean_m": m["rpe_1m_trans_mean_m"],
             "max_trans_error_m": m["max_trans_error_m"],
             "distance_travelled_m": m["distance_travelled_m"],
+            "live_vs_rebuilt_iou": m["live_vs_rebuilt_iou"],
+            "ghost_wall_share": m["ghost_wall_share"],
         }
         res["logs"][p.name.split("-corrected")[0]].update(_real_odometry(p, cfg, progress))
     if progress:

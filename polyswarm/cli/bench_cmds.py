@@ -219,6 +219,14 @@ def bench_view(
     _emit(res, as_json, f"live view: {robots} robots on {world}", rows)
 
 
+def _live_row(name: str, m: dict) -> tuple[str, str]:
+    """The map shared as it went against the map at the final poses."""
+    return (
+        f"{name}: live map vs rebuilt, IoU / ghost walls",
+        f"{m['live_vs_rebuilt_iou']:.3f} / {100 * m['ghost_wall_share']:.1f} %",
+    )
+
+
 @bench_app.command("slam")
 def bench_slam(
     as_json: bool = JSON_OPT,
@@ -249,7 +257,10 @@ def bench_slam(
         ours, thesis = 100 * m["max_trans_error_ratio"], 100 * m["thesis_max_trans_error_ratio"]
         rows.append((f"{w}: max error / distance (thesis)", f"{ours:.3f} % ({thesis:.3f} %)"))
         rows.append((f"{w}: map IoU, polygons", f"{m['map_iou']:.3f}, {m['polygons']}"))
+        rows.append(_live_row(w, m))
     for name, m in res["logs"].items():
+        real = m.get("real_odometry")
+        rows.append(_live_row(f"log {name}", real or m))
         rows.append(
             (
                 f"log {name}: ATE (odometry), synthetic noise",

@@ -336,6 +336,7 @@ def metrics(run: SlamRun) -> dict:
         "rejected_keyframes": run.slam.rejected_keyframes,
         **run.info,
     }
+    out |= live_vs_rebuilt(run)
     if run.simulated and run.world is not None:
         w = run.world
         out["map_iou"] = ev.map_iou(run.map.explored_region(), w.free)
@@ -343,6 +344,24 @@ def metrics(run: SlamRun) -> dict:
         ws, we = w.wall_segments
         out["wall_distance_mean_m"] = ev.wall_distance(s, e, ws, we)
     return out
+
+
+GHOST_WALL_M = 0.1  # a live wall farther than this from every rebuilt wall is a ghost
+
+
+def live_vs_rebuilt(run: SlamRun) -> dict:
+    """The map the robot shared as it went (``PolySlam.map``: keyframes merged at the
+    poses they had then) against the same keyframes merged at the final, optimised
+    poses: explored-area IoU and the share of live walls the rebuilt map lacks. Without
+    loop closures the two maps are the same."""
+    live = run.slam.map
+    rebuilt = run.final_map if run.final_map is not None else live
+    s, e, _ = live.vectors([VectorType.OBSTACLE])
+    rs, re_, _ = rebuilt.vectors([VectorType.OBSTACLE])
+    return {
+        "live_vs_rebuilt_iou": ev.map_iou(live.explored_region(), rebuilt.explored_region()),
+        "ghost_wall_share": ev.ghost_wall_share(s, e, rs, re_, GHOST_WALL_M),
+    }
 
 
 def _trajectory_errors(run: SlamRun) -> dict:
