@@ -1,6 +1,6 @@
 """Topological graph of a PolyMap for a robot of radius r (thesis chapter 4).
 
-* a node per convex piece of each cell's partition (``polyswarm.partition``);
+* a node per convex piece of each cell's partition (``polyswarm.polymap.partition``);
 * an edge across each shared sector vector, from the partition's own bookkeeping:
   inside a cell the split records which two pieces it joins; across a cell border the
   pieces are matched by interval overlap along the border line, which is known exactly
@@ -43,6 +43,7 @@ from polyswarm.polymap import (
     VectorType,
     point_segment_distance,
 )
+from polyswarm.polymap.partition import partition_of
 
 NodeId = tuple[int, int, int]  # cell i, cell j, piece index
 PORTAL_STEP_M = 0.05  # openings are checked for clearance at this spacing
@@ -157,7 +158,7 @@ class NavGraph:
         jobs = _Openings()
         centroids = []
         for c in live:
-            part = pmap.cells[c].partition
+            part = partition_of(pmap.cells[c])
             for pa, pb, a, b in part.internal_links():
                 jobs.add(("link", c, (pa, pb)), a, b)
             for k, _, a, b in _border_segments(pmap.cells[c]):
@@ -189,7 +190,7 @@ class NavGraph:
             portals = [p if p is not None else t for p, t in zip(portals, tight, strict=True)]
 
         # 3. assemble nodes and edges
-        fresh = {c: CellGraph({}, {}, len(pmap.cells[c].partition.pieces)) for c in live}
+        fresh = {c: CellGraph({}, {}, len(partition_of(pmap.cells[c]).pieces)) for c in live}
         k = 0
         for c in live:
             cg = fresh[c]
@@ -397,7 +398,7 @@ def _border_segments(cell) -> list:
     cached = cell.__dict__.get("_border_segments")
     if cached is not None:
         return cached
-    owner, xy, nxt, types, links = cell.partition.vectors
+    owner, xy, nxt, types, links = partition_of(cell).vectors
     cand = (types == SECTOR) & (links < 0)
     x0, y0, x1, y1 = cell.bounds
     out = []
@@ -448,7 +449,7 @@ def nodes_of(pmap: GridPolyMap, xy: np.ndarray) -> list[NodeId | None]:
 
 
 def piece_polygon(pmap: GridPolyMap, node: NodeId) -> np.ndarray:
-    return pmap.cells[(node[0], node[1])].partition.pieces[node[2]].xy
+    return partition_of(pmap.cells[(node[0], node[1])]).pieces[node[2]].xy
 
 
 def clearance_at(pmap: GridPolyMap, xy: np.ndarray, reach: float = 2.0) -> np.ndarray:

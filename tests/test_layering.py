@@ -60,3 +60,62 @@ def test_agents_do_not_import_the_simulator_or_the_command():
     for name, imps in modules("agents"):
         assert "sim" not in top(imps) and "pybullet" not in top(imps), name
         assert not any(i.startswith(COMMAND) for i in imps), name
+
+
+def _module_graph(package: str, root: Path = ROOT) -> dict[str, set[str]]:
+    """Which modules of ``package`` each of its modules imports (function-level imports
+    included, ``if TYPE_CHECKING:`` blocks not: they never run). A package is its
+    ``__init__``."""
+    files = sorted((root / package).rglob("*.py"))
+    key = {
+        p: ".".join(p.relative_to(root).with_suffix("").parts).removesuffix(".__init__")
+        for p in files
+    }
+    names = set(key.values())
+    graph = {}
+    for p in files:
+        name = key[p]
+        tree = ast.parse(p.read_text())
+        skip = {
+            id(n)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.If) and getattr(node.test, "id", "") == "TYPE_CHECKING"
+            for n in ast.walk(node)
+        }
+        deps = set()
+        for node in ast.walk(tree):
+            if id(node) in skip or not isinstance(node, ast.ImportFrom | ast.Import):
+                continue
+            targets = (
+                [node.module] if isinstance(node, ast.ImportFrom) else [a.name for a in node.names]
+            )
+            for target in filter(None, targets):
+                t = target
+                while t and t not in names:
+                    t = t.rpartition(".")[0]
+                if t and t != name:
+                    deps.add(t)
+        graph[name] = deps
+    return graph
+
+
+def test_the_core_has_no_import_cycles():
+    graph = {
+        k: {d for d in v if not d.startswith(COMMAND)}
+        for k, v in _module_graph("polyswarm").items()
+        if not k.startswith(COMMAND)
+    }
+    done: set[str] = set()
+
+    def visit(node: str, path: list[str]) -> None:
+        if node in path:
+            raise AssertionError("import cycle: " + " -> ".join([*path[path.index(node) :], node]))
+        if node in done:
+            return
+        for dep in graph.get(node, ()):
+            if dep != "polyswarm":
+                visit(dep, [*path, node])
+        done.add(node)
+
+    for node in graph:
+        visit(node, [])

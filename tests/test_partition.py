@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from polyswarm.polymap import Cell, GridPolyMap, Ring, TypedPolygon, VectorType
+from polyswarm.polymap.partition import partition_of
 from tests.conftest import O, rect
 
 
@@ -15,7 +16,7 @@ def convex(xy: np.ndarray) -> bool:
 
 def check(pmap: GridPolyMap) -> None:
     for cell in pmap.cells.values():
-        part = cell.partition
+        part = partition_of(cell)
         assert sum(p.area for p in part.pieces) == pytest.approx(cell.area, abs=1e-9)
         for k, p in enumerate(part.pieces):
             assert convex(p.xy)
@@ -28,7 +29,7 @@ def check(pmap: GridPolyMap) -> None:
 def test_l_shaped_room_splits_into_convex_pieces():
     ring = Ring([(0.1, 0.1), (1.9, 0.1), (1.9, 0.8), (0.8, 0.8), (0.8, 1.9), (0.1, 1.9)], [O] * 6)
     pmap = GridPolyMap(2.0).merge(TypedPolygon(ring)).map
-    part = pmap.cells[(0, 0)].partition
+    part = partition_of(pmap.cells[(0, 0)])
     assert len(part.pieces) == 2
     check(pmap)
     assert len(part.internal_links()) == 1
@@ -42,7 +43,7 @@ def test_room_with_a_pillar():
     hole = Ring([(0.9, 0.9), (0.9, 1.1), (1.1, 1.1), (1.1, 0.9)], [O] * 4)
     pmap = GridPolyMap(2.0).merge(TypedPolygon(outer, (hole,))).map
     check(pmap)
-    part = pmap.cells[(0, 0)].partition
+    part = partition_of(pmap.cells[(0, 0)])
     assert part.locate(1.0, 1.0) is None  # inside the pillar
     assert part.locate(0.5, 0.5) is not None
 
@@ -76,7 +77,7 @@ def test_locate_many_answers_as_locate_does_point_by_point():
     pmap = random_map(rng, 12, 24)
     pts = [rng.uniform(-6, 6, (400, 2)), np.array([[0.0, 0.0], [2.0, 1.0], [-2.0, -2.0]])]
     for cell in pmap.cells.values():  # points on the pieces' own vertices and edges
-        for p in cell.partition.pieces:
+        for p in partition_of(cell).pieces:
             pts.append(p.xy)
             pts.append(0.5 * (p.xy + np.roll(p.xy, -1, axis=0)))
     pts = np.concatenate(pts)
@@ -109,7 +110,7 @@ def test_a_collinear_vertex_the_triangulation_skips_keeps_its_types():
         [F] * 4,
     )
     cell = Cell((0, 0), 2.0, (TypedPolygon(shell, (hole,)),))
-    pieces = cell.partition.pieces
+    pieces = partition_of(cell).pieces
     assert sum(p.area for p in pieces) == pytest.approx(cell.area, abs=1e-9)
     # the east (x = 2) and north (y = 2) borders: sector along their whole length
     # but the mapped millimetre of frontier

@@ -21,12 +21,12 @@ from polyswarm.polymap import (
     Ring,
     TypedPolygon,
     VectorType,
-    _across_changed_borders,
-    _obstacle_mask,
-    _segment_tree,
     cells_digest,
     snap_polygon,
 )
+from polyswarm.polymap.borders import _across_changed_borders
+from polyswarm.polymap.partition import partition_of
+from polyswarm.polymap.vectortypes import _obstacle_mask, _segment_tree
 from tests.conftest import F, O, rect, star
 
 
@@ -266,7 +266,7 @@ def test_queries_on_a_room():
     assert pmap.nearest_obstacle_distance(4.0, 1.5) == pytest.approx(1.0)
     cell, piece = pmap.locate(3.0, 1.0)
     assert cell == (1, 0)
-    assert pmap.cells[cell].partition.pieces[piece].contains(3.0, 1.0)
+    assert partition_of(pmap.cells[cell]).pieces[piece].contains(3.0, 1.0)
     assert pmap.locate(7.0, 1.0) is None
 
 

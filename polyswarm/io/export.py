@@ -14,6 +14,7 @@ import numpy as np
 
 from polyswarm.errors import PolyswarmError
 from polyswarm.polymap import GridPolyMap, VectorType
+from polyswarm.polymap.partition import partition_of
 
 COLOURS = {
     VectorType.OBSTACLE: "#d62728",
@@ -130,7 +131,7 @@ def to_svg(
             )
     if show_sectors:
         for cell in pmap.cells.values():
-            for piece in cell.partition.pieces:
+            for piece in partition_of(cell).pieces:
                 nxt = np.roll(piece.xy, -1, axis=0)
                 for a, b, ln in zip(piece.xy, nxt, piece.links, strict=True):
                     if ln >= 0:

@@ -25,7 +25,8 @@ import mapbox_earcut
 import numpy as np
 import shapely
 
-from polyswarm.polymap import PRECISION_M, UNITS_PER_M, Cell, VectorType
+from polyswarm.polymap.cells import Cell
+from polyswarm.polymap.rings import PRECISION_M, UNITS_PER_M, VectorType
 
 log = logging.getLogger(__name__)
 
@@ -138,6 +139,14 @@ def _outside_distance(xy: np.ndarray, x: float, y: float) -> float:
     L = np.where(L > 0, L, 1.0)
     signed = (d[:, 0] * (y - a[:, 1]) - d[:, 1] * (x - a[:, 0])) / L
     return float(max(0.0, -signed.min()))
+
+
+def partition_of(cell: Cell) -> CellPartition:
+    """The cell's convex pieces, computed once per cell object (cells are immutable)."""
+    got = cell.__dict__.get("_partition")
+    if got is None:
+        got = cell.__dict__["_partition"] = partition_cell(cell)
+    return got
 
 
 def partition_cell(cell: Cell) -> CellPartition:
