@@ -30,6 +30,7 @@ import numpy as np
 
 from polyswarm.config import IcpReference, SlamConfig
 from polyswarm.errors import PolyswarmError
+from polyswarm.follow import follow
 from polyswarm.icp import IcpResult, PointToVectorIcp
 from polyswarm.keyframe import keyframe_polygon
 from polyswarm.loopsearch import correlative_search
@@ -161,6 +162,12 @@ class PolySlam:
         self._steps: list[tuple[int, np.ndarray]] = []  # every scan: (keyframe, offset)
         self._last_loop = self._last_search = -(10**9)  # keyframes of the last loop, search
         self._travel_since_loop_m = 0.0  # distance driven since the last loop edge
+        # the map follows the pose graph (polyswarm.follow): where each keyframe's content
+        # sits in the map, and what each correction cost
+        self._merged_at = np.zeros((0, 3))
+        self._follows = cfg.map_follows_graph
+        self._followed = False  # this step's correction changed the map
+        self.corrections: list[dict] = []
 
     def resume(self, pmap: GridPolyMap, pose, odom=None) -> None:
         """Continue on a persisted map from the last known pose (an agent restarted): the
@@ -175,6 +182,10 @@ class PolySlam:
         self.pose = np.array(pose, dtype=float)
         sub = self.cfg.submap  # the keyframes are not persisted: match the map until new ones
         self.store = KeyframeStore(sub.keyframes, sub.radius_m, sub.recent)
+        # the map holds keyframes the store does not: rebuilding cells from the store
+        # alone would drop them, so a resumed map no longer follows the graph
+        self._merged_at = np.zeros((0, 3))
+        self._follows = False
         self.graph = PoseGraph()
         self._steps = []
         self._kf_pose = self._kf_odom = None
@@ -223,6 +234,7 @@ class PolySlam:
                 self._steps.append((len(self.graph) - 1, relative(self._kf_pose, pred)))
             return SlamStep(pred, False)
         # 4. point-to-vector ICP against the obstacle vectors near the robot
+        start_version = self.map.version
         res = None
         pose = pred
         valid = points.xy[points.valid]
@@ -246,12 +258,15 @@ class PolySlam:
         # 7. merge into the robot's map, its vertices on the wire's grid; the changed cells
         # are the delta, and the merge itself is a smaller one
         base, op = self.map.version, None
+        followed, self._followed = self._followed, False
+        if followed:  # the correction's cells and this merge go out as one cell delta
+            base = start_version
         news = trim_keyframe(kf, self.map, self.merge_options) if self.cfg.trim_merges else kf
         snapped = snap_polygon(news, self._quantum_u) if self._quantum_u else None
         try:
             merged = self.map.merge(news if snapped is None else snapped, self.merge_options)
             self.map = merged.map
-            if snapped is not None and merged.changed:
+            if snapped is not None and merged.changed and not followed:
                 digest = cells_digest(merged.map.cells[i] for i in merged.changed)
                 op = MergeOp(
                     self.map.cell_size, base, self.map.version, snapped, self.merge_options, digest
@@ -261,6 +276,7 @@ class PolySlam:
             log.warning("keyframe %d not merged: %s", self.keyframes, e)
         t["merge"] = time.perf_counter()
         self.store.add(pose, kf)
+        self._merged_at = np.vstack([self._merged_at, np.asarray(pose, float)[None, :3]])
         if self.keep_trajectory:
             self._steps.append((len(self.graph) - 1, np.zeros(3)))
         delta = self.map.delta_since(base) if self.map.version != base else None
@@ -397,8 +413,24 @@ class PolySlam:
             return pose  # the loop agrees with tracking: nothing to correct yet
         poses = self.graph.optimise()
         self.store.set_poses(poses[:-1])
+        if self._follows:
+            self._follow()
         log.debug("loop %d -> %d closed: moved %.3f m, %.2f deg", anchor, node, shift, turn)
         return poses[-1]
+
+    def _follow(self) -> None:
+        """Merge again the cells of keyframes the optimisation moved (polyswarm.follow)."""
+        before = self.map.version
+        self.map, self._merged_at, info = follow(
+            self.map,
+            self.store.keyframes,
+            self._merged_at,
+            self.merge_options,
+            self.cfg.rebuild_batch,
+        )
+        self._followed |= self.map.version != before
+        if info["moved"]:
+            self.corrections.append(info)
 
     def _loop_accepted(self, m: IcpResult, pose, n_points: int, window_m: float) -> bool:
         lc = self.cfg.loop_closure

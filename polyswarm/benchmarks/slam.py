@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 import shapely
 
-from polyswarm.config import Config, RefineConfig
+from polyswarm.config import Config, RefineConfig, with_overrides
 from polyswarm.data import WORLDS, log_paths
 from polyswarm.errors import DataFormatError
 from polyswarm.odometry import IncrementNoise
@@ -74,6 +74,10 @@ def _real_odometry(path, cfg: Config, progress) -> dict:
         m = metrics(run_log(path, cfg, odometry=OdometrySource.LOG))
     except DataFormatError:
         return {"real_odometry": None}
+    if progress:
+        progress(f"log {path.name}, real odometry, the map following the pose graph")
+    following = with_overrides(cfg, {"slam": {"map_follows_graph": True}})
+    f = metrics(run_log(path, following, odometry=OdometrySource.LOG))
     return {
         "real_odometry": {
             "ate_rmse_m": m["ate_rmse_m"],
@@ -83,6 +87,22 @@ def _real_odometry(path, cfg: Config, progress) -> dict:
             "reseeded_keyframes": m["reseeded_keyframes"],
             "live_vs_rebuilt_iou": m["live_vs_rebuilt_iou"],
             "ghost_wall_share": m["ghost_wall_share"],
+            "keyframe_p95_ms": m["keyframe_p95_ms"],
+            # the same run with slam.map_follows_graph (polyswarm.follow)
+            "following": {
+                k: f[k]
+                for k in (
+                    "ate_rmse_m",
+                    "live_vs_rebuilt_iou",
+                    "ghost_wall_share",
+                    "keyframe_p95_ms",
+                    "corrections",
+                    "correction_cells",
+                    "correction_p50_ms",
+                    "correction_p95_ms",
+                    "realtime_factor",
+                )
+            },
         }
     }
 

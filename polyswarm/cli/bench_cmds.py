@@ -261,6 +261,8 @@ def bench_slam(
     for name, m in res["logs"].items():
         real = m.get("real_odometry")
         rows.append(_live_row(f"log {name}", real or m))
+        if real is not None:
+            rows.append(_live_row(f"log {name}, map following the graph", real["following"]))
         rows.append(
             (
                 f"log {name}: ATE (odometry), synthetic noise",

@@ -337,6 +337,7 @@ def metrics(run: SlamRun) -> dict:
         **run.info,
     }
     out |= live_vs_rebuilt(run)
+    out |= corrections(run)
     if run.simulated and run.world is not None:
         w = run.world
         out["map_iou"] = ev.map_iou(run.map.explored_region(), w.free)
@@ -361,6 +362,19 @@ def live_vs_rebuilt(run: SlamRun) -> dict:
     return {
         "live_vs_rebuilt_iou": ev.map_iou(live.explored_region(), rebuilt.explored_region()),
         "ghost_wall_share": ev.ghost_wall_share(s, e, rs, re_, GHOST_WALL_M),
+    }
+
+
+def corrections(run: SlamRun) -> dict:
+    """Loop closures that moved keyframes' content in the live map (polyswarm.follow):
+    how many, the cells merged again, and the time each took (part of its keyframe's)."""
+    c = run.slam.corrections
+    ms = [x["ms"] for x in c]
+    return {
+        "corrections": len(c),
+        "correction_cells": int(sum(x["cells"] for x in c)),
+        "correction_p50_ms": float(np.median(ms)) if ms else None,
+        "correction_p95_ms": float(np.percentile(ms, 95)) if ms else None,
     }
 
 
