@@ -40,6 +40,10 @@ BAND_SHARE = 0.8  # of min_growth_m: a sliver thinner than min_growth_m is not m
 SAMPLE_SHARE = 1.0  # chords are checked at points this share of the band apart
 MIN_SAMPLE_M = 0.01  # ... and never closer than 1 cm (band 0: the interior test alone)
 MAX_REPAIRS = 4  # rounds of undoing chords that cross the ring, before giving up
+# vectors longer than this are not checked (their ends stay): most are frontiers into the
+# unknown, and sampling them took half the trimming's time on 720-beam scans (zigzag:
+# p95 19 ms -> 11 ms; csail keeps 0.86 of its vertices instead of 0.81)
+MAX_EDGE_M = 4.0
 
 
 class _Zone:
@@ -54,7 +58,7 @@ class _Zone:
             self.band,
         )
         s = pmap.cell_size
-        pad = self.reach + s
+        pad = self.reach + self.band  # the zone is asked about points of the polygon only
         x0, y0, x1, y1 = bounds
         i0, j0 = pmap.cell_index(x0 - pad, y0 - pad)
         i1, j1 = pmap.cell_index(x1 + pad, y1 + pad)
@@ -214,14 +218,21 @@ def _edges_allowed(xy: np.ndarray, is_obst: np.ndarray, zone: _Zone, idx) -> np.
     """Do vectors ``idx`` (vector i runs from ``xy[i]`` to ``xy[i+1]``) lie in the zone
     for their type?"""
     b = np.roll(xy, -1, axis=0)
-    counts = np.maximum(2, np.ceil(np.hypot(*(b[idx] - xy[idx]).T) / zone.step).astype(int) + 1)
+    length = np.hypot(*(b[idx] - xy[idx]).T)
+    long = length > MAX_EDGE_M  # kept as they are: not worth sampling (see MAX_EDGE_M)
+    idx, length = idx[~long], length[~long]
+    if not len(idx):
+        return np.zeros(len(long), bool)
+    counts = np.maximum(2, np.ceil(length / zone.step).astype(int) + 1)
     which = np.repeat(idx, counts)
     t = np.concatenate([np.linspace(0.0, 1.0, c) for c in counts])[:, None]
     pts = xy[which] + t * (b[which] - xy[which])
     obst = is_obst[which]
     ok = zone.allows(pts, obstacle=False)
     ok[obst & ok] = zone.allows(pts[obst & ok], obstacle=True)
-    return np.logical_and.reduceat(ok, np.concatenate([[0], np.cumsum(counts)[:-1]]))
+    out = np.zeros(len(long), bool)
+    out[~long] = np.logical_and.reduceat(ok, np.concatenate([[0], np.cumsum(counts)[:-1]]))
+    return out
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
