@@ -293,7 +293,7 @@ class ViewState:
                 self.stats.display_latency_ms.append(at_ms - t * 1e3)
 
 
-def follow(bus, state: ViewState, stop: threading.Event) -> None:
+def listen(bus, state: ViewState, stop: threading.Event) -> None:
     """Zenoh side: subscribe, then apply what arrives until ``stop``."""
     keys = state.keys
     bus.subscribe(keys.merged_delta, MapChunk)
@@ -400,7 +400,7 @@ def serve(session_spec, swarm: str, host: str, port: int, robot_radius_m: float,
     state = ViewState(SwarmKeys(swarm), robot_radius_m)
     with open_session(session_spec) as session:
         bus = Bus(session, "view")
-        zenoh_side = threading.Thread(target=follow, args=(bus, state, stop), daemon=True)
+        zenoh_side = threading.Thread(target=listen, args=(bus, state, stop), daemon=True)
         zenoh_side.start()
 
         async def main() -> None:
