@@ -49,6 +49,7 @@ from protocols.mapcodec import (
     encode_map,
 )
 from protocols.messages import (
+    MAX_STATUS_POINTS,
     Assignment,
     AssignmentKind,
     CoordinatorStatus,
@@ -450,6 +451,8 @@ class Coordinator:
             ms,
             self.bytes_sent,
             cpu_ms,
+            _points_cm([t.goal for t in self.targets.values()]),
+            _points_cm(self.blacklist[::2]),  # goals (each is followed by its midpoint)
         )
         return out
 
@@ -658,6 +661,11 @@ def _gap(rid: str, delta: MapDelta) -> MapError:
 
 
 # --- the process ---------------------------------------------------------------------------------
+
+
+def _points_cm(points) -> tuple[tuple[float, float], ...]:
+    """At most MAX_STATUS_POINTS points, rounded to centimetres (for views)."""
+    return tuple((round(float(p[0]), 2), round(float(p[1]), 2)) for p in points)[:MAX_STATUS_POINTS]
 
 
 def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = None) -> Coordinator:

@@ -11,8 +11,9 @@ Websocket messages (JSON), server to page:
 * ``{"t": "cells", "ver": n, "full": bool, "cells": {"i,j": cell}}``: a cell is
   ``{"explored": [svg path, ...], "obstacles": svg path, "frontiers": svg path}``, one
   explored path per polygon of the cell (``full``: every cell, the page drops the rest);
-* ``{"t": "state", ...}``: mission, simulated time, explored-area curve, and per robot
-  pose, recent trail, state, liveness, target, frontier, path and bytes sent;
+* ``{"t": "state", ...}``: mission, simulated time, explored-area curve, the frontier
+  targets and the blacklisted ones, and per robot pose, recent trail, state, liveness,
+  target, frontier, path and bytes sent;
 
 and page to server ``{"t": "shown", "ver": n, "at_ms": wall ms}`` once a map version is
 drawn, from which the view measures its display latency (``ViewStats``).
@@ -120,6 +121,8 @@ class ViewState:
         self.coordinator_version = -1
         self.sim_t: float | None = None
         self.curve: deque = deque(maxlen=CURVE_POINTS)  # (time s, explored m2)
+        self.targets: tuple = ()  # the coordinator's frontier targets (goal points)
+        self.blacklisted: tuple = ()  # targets it gave up on
         self.changed: set = set()  # cells changed since the page was last sent them
         self.full = True  # the page needs every cell
         self.need_map = True
@@ -175,6 +178,7 @@ class ViewState:
         elif isinstance(msg, CoordinatorStatus):
             self.mission = str(msg.state)
             self.coordinator_version = msg.map_version
+            self.targets, self.blacklisted = msg.targets, msg.blacklisted
             for name in msg.robots:
                 self.robot(name)
             if not self.curve or self.now() - self.curve[-1][0] >= 1.0:
@@ -258,6 +262,8 @@ class ViewState:
                 "ver": self.map.version,
                 "radius": self.radius,
                 "curve": list(self.curve),
+                "targets": [list(p) for p in self.targets],
+                "blacklisted": [list(p) for p in self.blacklisted],
                 "robots": robots,
             }
 
@@ -287,7 +293,7 @@ class ViewState:
                 self.stats.display_latency_ms.append(at_ms - t * 1e3)
 
 
-def follow(bus, state: ViewState, stop: threading.Event) -> None:
+def listen(bus, state: ViewState, stop: threading.Event) -> None:
     """Zenoh side: subscribe, then apply what arrives until ``stop``."""
     keys = state.keys
     bus.subscribe(keys.merged_delta, MapChunk)
@@ -394,7 +400,7 @@ def serve(session_spec, swarm: str, host: str, port: int, robot_radius_m: float,
     state = ViewState(SwarmKeys(swarm), robot_radius_m)
     with open_session(session_spec) as session:
         bus = Bus(session, "view")
-        zenoh_side = threading.Thread(target=follow, args=(bus, state, stop), daemon=True)
+        zenoh_side = threading.Thread(target=listen, args=(bus, state, stop), daemon=True)
         zenoh_side.start()
 
         async def main() -> None:

@@ -114,6 +114,7 @@ def _points(v: Any, name: str, max_n: int = 4096) -> tuple[tuple[float, float], 
 
 
 MAX_STATUS_PATH_POINTS = 64  # a robot status carries at most this many path points
+MAX_STATUS_POINTS = 256  # a coordinator status: at most this many targets (and blacklisted)
 
 
 # --- messages ----------------------------------------------------------------------------
@@ -358,9 +359,11 @@ class CoordinatorStatus(Message):
     cycle_ms: float = 0.0  # wall time of the last cycle (merges since the previous one included)
     bytes_sent: int = 0
     cycle_cpu_ms: float = 0.0  # the same cycle's processor time (not time spent preempted)
+    targets: tuple[tuple[float, float], ...] = ()  # frontier targets' goal points (views)
+    blacklisted: tuple[tuple[float, float], ...] = ()  # goals given up on (views)
 
     def body(self) -> dict:
-        return {
+        out = {
             "state": str(self.state),
             "robots": list(self.robots),
             "frontiers": self.frontiers,
@@ -370,6 +373,11 @@ class CoordinatorStatus(Message):
             "bytes": self.bytes_sent,
             "cpu_ms": self.cycle_cpu_ms,
         }
+        if self.targets:  # absent when empty (and in older senders' messages)
+            out["goals"] = [list(p) for p in self.targets]
+        if self.blacklisted:
+            out["banned"] = [list(p) for p in self.blacklisted]
+        return out
 
     @classmethod
     def from_body(cls, b: dict) -> CoordinatorStatus:
@@ -388,6 +396,8 @@ class CoordinatorStatus(Message):
             _num(b.get("cycle_ms", 0.0), "cycle_ms", 0.0),
             _int(b.get("bytes", 0), "bytes", 0),
             _num(b.get("cpu_ms", 0.0), "cpu_ms", 0.0),
+            _points(b.get("goals", ()), "goals", MAX_STATUS_POINTS),
+            _points(b.get("banned", ()), "banned", MAX_STATUS_POINTS),
         )
 
 

@@ -49,6 +49,28 @@ def test_a_new_page_gets_every_cell_then_only_changes():
     assert state.take_cells() is None
 
 
+def test_the_coordinators_targets_and_blacklist_reach_the_page():
+    from agents.session import Received
+    from protocols.messages import CoordinatorStatus, MissionState, decode, encode
+
+    keys = SwarmKeys("t")
+    status = CoordinatorStatus(
+        MissionState.EXPLORING,
+        ("r1",),
+        2,
+        3,
+        10.0,
+        targets=((1.0, 2.0), (3.5, -1.25)),
+        blacklisted=((7.0, 7.0),),
+    )
+    _, back = decode(encode(status, "coordinator", 1, 0.0), CoordinatorStatus)
+    assert back == status  # the wire carries them
+    state = ViewState(keys, 0.2)
+    state.handle(Received(keys.coordinator_status, "coordinator", 1, 0.0, back))
+    page = state.state()
+    assert page["targets"] == [[1.0, 2.0], [3.5, -1.25]] and page["blacklisted"] == [[7.0, 7.0]]
+
+
 def _fetch_merged(bus, swarm: str):
     got = bus.fetch_map(SwarmKeys(swarm).merged_map, timeout_s=3.0)
     return None if got is None else decode_map(got[0])
@@ -121,6 +143,7 @@ def test_launch_view_in_headless_chromium(tmp_path):
             page.goto(url)
             page.wait_for_selector("path.explored", timeout=60_000)
             page.wait_for_selector("#robot-r1 circle", timeout=60_000)
+            page.wait_for_selector("circle.target", timeout=60_000)  # frontier targets
             # the page holds the coordinator's merged map, polygon for polygon
             ver, polygons = _same_as_coordinator(page, bus, swarm)
             assert polygons > 0

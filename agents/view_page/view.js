@@ -70,7 +70,18 @@ function drawRobot(id, r, radius) {
   t.textContent = `${id} ${r.state}`;
 }
 
+function drawTargets(targets, blacklisted) {
+  const g = document.getElementById("targets");
+  g.replaceChildren();
+  for (const [x, y] of targets) el("circle", {class: "target", cx: x, cy: y, r: 0.15}, g);
+  const s = 0.15;
+  for (const [x, y] of blacklisted) {
+    el("path", {class: "blacklisted", d: `M${x - s} ${y - s}L${x + s} ${y + s}M${x - s} ${y + s}L${x + s} ${y - s}`}, g);
+  }
+}
+
 function onState(m) {
+  drawTargets(m.targets, m.blacklisted);
   for (const [id, r] of Object.entries(m.robots)) drawRobot(id, r, m.radius);
   const when = m.simulated ? `simulated ${m.time_s.toFixed(0)} s` : `${m.time_s.toFixed(0)} s`;
   document.getElementById("mission").textContent = `mission ${m.mission}, ${when}, map v${m.ver}`;
