@@ -148,11 +148,15 @@ def test_launch_view_in_headless_chromium(tmp_path):
             ver, polygons = _same_as_coordinator(page, bus, swarm)
             assert polygons > 0
             # each robot's marker moves between two reads
+            # (a robot turning on the spot to look does not move: read for up to 20 s)
             xy = "id => ['x', 'y'].map(k => +document.getElementById(id).dataset[k])"
             a = page.evaluate(xy, "robot-r1")
-            time.sleep(3.0)
-            b = page.evaluate(xy, "robot-r1")
-            assert abs(a[0] - b[0]) + abs(a[1] - b[1]) > 0.05
+            for _ in range(40):
+                time.sleep(0.5)
+                b = page.evaluate(xy, "robot-r1")
+                if abs(a[0] - b[0]) + abs(a[1] - b[1]) > 0.05:
+                    break
+            assert abs(a[0] - b[0]) + abs(a[1] - b[1]) > 0.05, (a, b)
             # r2 is killed from outside at 25 simulated seconds: shown lost within the lease
             page.wait_for_function(
                 "() => document.getElementById('robot-r2')?.classList.contains('lost')",
