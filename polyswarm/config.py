@@ -274,7 +274,7 @@ class SlamConfig:
     # 0: not snapped, and deltas go as changed cells
     merge_quantum_m: float = num(0.001, 0.0, 0.05)
     # a keyframe is merged (and sent) with the stretches that cannot change the map
-    # replaced by chords (polyswarm.trim): 11-21 % fewer bytes sent on the shared logs
+    # replaced by chords (polyswarm.trim): 8-17 % fewer bytes sent on the shared logs
     trim_merges: bool = True
     # after a loop closure, the cells of keyframes it moved are merged again at their
     # new poses (polyswarm.follow) and sent as a cell delta: the shared map loses the

@@ -98,7 +98,7 @@ def test_nothing_mapped_nothing_trimmed():
     assert trim_keyframe(kf, GridPolyMap(2.0), OPTS) is kf
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(
     st.floats(-1.5, 1.5),
     st.floats(-1.0, 1.0),
