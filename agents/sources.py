@@ -69,16 +69,7 @@ def subscribe_sensors(bus, me: RobotKeys, io: AgentIoConfig, frames: RosFrames) 
     def on_scan(data: bytes) -> tuple[float, Scan]:
         s, frame = ros.decode_laserscan_framed(data)
         frames.scan_frame = frame
-        msg = Scan(
-            s.angle_min,
-            s.angle_increment,
-            s.range_min,
-            s.range_max,
-            s.ranges,
-            s.time_increment,
-            s.scan_time,
-        )
-        return s.stamp, msg
+        return s.stamp, Scan.from_laserscan(s)
 
     def on_odom(data: bytes) -> tuple[float, Odometry]:
         stamp, pose, (v, w), child = ros.decode_odometry_framed(data)

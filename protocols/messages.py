@@ -24,6 +24,7 @@ import msgpack
 import numpy as np
 
 from polyswarm.errors import DecodeError
+from polyswarm.scan import LaserScan
 from protocols.keys import NAME_RE
 
 PROTOCOL_VERSION = 1
@@ -159,6 +160,19 @@ class Scan(Message):
     ranges_m: np.ndarray = field(repr=False)
     time_increment_s: float = 0.0
     scan_time_s: float = 0.0
+
+    @classmethod
+    def from_laserscan(cls, s: LaserScan) -> Scan:
+        """The wire message of a sweep (its stamp goes in the envelope)."""
+        return cls(
+            s.angle_min,
+            s.angle_increment,
+            s.range_min,
+            s.range_max,
+            np.asarray(s.ranges, dtype=np.float32),
+            s.time_increment,
+            s.scan_time,
+        )
 
     def body(self) -> dict:
         b = {

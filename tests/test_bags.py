@@ -145,7 +145,7 @@ def test_truncated_and_corrupt_bags_give_one_clear_error_or_a_counted_skip(bags,
         try:
             bag = read_bag(path)
         except DataFormatError as e:
-            assert str(path) in str(e) or "bag" in str(e)
+            assert str(path) in str(e)  # one line naming the bag
         else:
             assert len(bag.scans) < 200 or bag.skipped
 

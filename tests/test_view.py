@@ -7,12 +7,12 @@ from __future__ import annotations
 import shutil
 import threading
 import time
-import urllib.request
 
 import pytest
 
 from agents.session import Bus, SessionSpec, open_session
 from agents.view import ViewState, cell_svg
+from polyswarm.benchmarks.view import BROWSER_ARGS, CHROMIUM, wait_http
 from polyswarm.config import load_config
 from polyswarm.polymap import GridPolyMap
 from polyswarm.runners.launch import Fault, LaunchOptions, free_port, launch
@@ -20,17 +20,6 @@ from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_map
 from tests.conftest import rect
 
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-BROWSER_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 LIVELINESS_LEASE_S = 10.0  # Zenoh's default transport lease: a dead peer is gone by then
 
 
@@ -76,18 +65,6 @@ def _fetch_merged(bus, swarm: str):
     return None if got is None else decode_map(got[0])
 
 
-def _wait_http(url: str, timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        try:
-            with urllib.request.urlopen(url, timeout=1.0) as r:
-                if r.status == 200:
-                    return
-        except OSError:
-            time.sleep(0.3)
-    raise AssertionError(f"{url} never answered")
-
-
 def _page_map(page) -> tuple[int, int]:
     return page.evaluate(
         "() => [Number(document.getElementById('map').dataset.version),"
@@ -130,7 +107,7 @@ def test_launch_view_in_headless_chromium(tmp_path):
     runner.start()
     try:
         url = f"http://127.0.0.1:{port}/"
-        _wait_http(url, 60.0)
+        assert wait_http(url, 60.0), f"{url} never answered"
         cfg = load_config(tmp_path / "run" / "config.toml")  # the launch's own endpoint
         endpoint, swarm = cfg.comms.endpoint, cfg.comms.swarm
         with (
@@ -177,4 +154,5 @@ def test_launch_view_in_headless_chromium(tmp_path):
     finally:
         stop.set()
         runner.join(timeout=60)
-    assert "r" in result
+    # the run ended cleanly: no process crashed, the view (and the browser's socket) included
+    assert result["r"].metrics["crashed_processes"] == [], result["r"].metrics["exit_codes"]

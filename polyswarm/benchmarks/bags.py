@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 import re
-import socket
 import subprocess
 import sys
 import tempfile
@@ -29,16 +28,12 @@ GENERATED_SCANS = 600  # 60 s at 10 Hz: the issue's "bag of 500+ scans"
 REPLAY_RATE = 5.0
 
 
-def _free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
-
-
 def replay(bag: Path, rate: float = REPLAY_RATE) -> dict:
     """``polyswarm agent --replay`` in its own process; its summary line parsed."""
     cmd = [sys.executable, "-m", "polyswarm", "agent", "--id", "r1", "--replay", str(bag)]
-    cmd += ["--rate", str(rate), "--listen", _free_endpoint()]
+    from polyswarm.runners.launch import free_port
+
+    cmd += ["--rate", str(rate), "--listen", f"tcp/127.0.0.1:{free_port()}"]
     t0 = time.perf_counter()
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=1200, check=False)
     wall = time.perf_counter() - t0

@@ -34,7 +34,8 @@ BROWSER_ARGS = [
 CHROMIUM = "/usr/bin/chromium"
 
 
-def _wait_http(url: str, timeout_s: float) -> bool:
+def wait_http(url: str, timeout_s: float) -> bool:
+    """Does ``url`` answer within ``timeout_s``?"""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         try:
@@ -56,7 +57,7 @@ def _run(opts, with_page: bool):
     runner = threading.Thread(target=lambda: result.update(r=launch(opts)))
     runner.start()
     url = f"http://127.0.0.1:{opts.view_port}/"
-    if _wait_http(url, 120.0):
+    if wait_http(url, 120.0):
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
             page = browser.new_page(viewport={"width": 1200, "height": 800})

@@ -96,15 +96,7 @@ class LogPlayer(Player):
         s = self.log.scans[k]
         x, y, th = (float(v) for v in self.odom[k])
         bus.publish(me.odom, Odometry(x, y, th), s.stamp, reliable=True)
-        sc = s.scan
-        msg = Scan(
-            sc.angle_min,
-            sc.angle_increment,
-            sc.range_min,
-            sc.range_max,
-            np.asarray(sc.ranges, dtype=np.float32),
-        )
-        bus.publish(me.scan, msg, s.stamp, reliable=True)
+        bus.publish(me.scan, Scan.from_laserscan(s.scan), s.stamp, reliable=True)
 
 
 class BagPlayer(Player):

@@ -161,17 +161,8 @@ def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration
             bus.publish(
                 keys.robot(rid).odom, Odometry(float(o[0]), float(o[1]), float(o[2]), r.v, r.w), t
             )
-            s = ev.scan
-            scan = Scan(
-                s.angle_min,
-                s.angle_increment,
-                s.range_min,
-                s.range_max,
-                s.ranges,
-                s.time_increment,
-                s.scan_time,
-            )
-            bus.publish(keys.robot(rid).scan, scan, s.stamp)  # stamped with its first beam
+            # stamped with its first beam
+            bus.publish(keys.robot(rid).scan, Scan.from_laserscan(ev.scan), ev.scan.stamp)
             if ("agent", rid) in alive:
                 seq = bus.last_seq(keys.robot(rid).scan)
                 sent[rid].append((seq, t))
