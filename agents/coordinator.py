@@ -20,6 +20,9 @@ Robot map deltas are applied to that robot's copy of its map as they arrive (a g
 fetches the robot's full map); the changed cells of all robots are merged into the
 global map in one batch (``flush``) every ``MERGE_PERIOD_S`` and before each cycle, so
 the navigation graph is updated once per batch and the merged map goes out as one delta.
+A robot's loop closure (a correction: keyframes moved) can take space out of its cells;
+the merged cells it changed are then merged afresh from every robot's copy, so a ghost
+wall or a frontier the correction closed leaves the merged map too.
 """
 
 from __future__ import annotations
@@ -37,12 +40,14 @@ from agents import persist
 from polyswarm.config import Config
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.explore import GraphIndex, Reach, Strategy, assign, target_groups
+from polyswarm.follow import Atlas, CorrectionOp, replay_correction
 from polyswarm.navgraph import NavGraph, clear_of
-from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions, VectorType
+from polyswarm.polymap import Cell, GridPolyMap, MapDelta, MergeOp, MergeOptions, VectorType
 from polyswarm.targets import Sensor, Target, TargetCache, frontier_targets
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import (
     decode_any_map,
+    decode_correction,
     decode_delta,
     decode_merge,
     encode_delta,
@@ -96,6 +101,8 @@ class RobotInfo:
     alive: bool = False
     pose: np.ndarray | None = None
     map: GridPolyMap | None = None
+    # the keyframes its merges carried, to replay its corrections (polyswarm.follow)
+    atlas: Atlas = field(default_factory=Atlas)
     status: RobotStatus | None = None
     assignment: Assignment | None = None
     sent_t: float = -math.inf
@@ -151,6 +158,8 @@ class Coordinator:
         # merge time since the last cycle (counts into the cycle): wall and processor ms
         self._pending_ms = self._pending_cpu_ms = 0.0
         self._pending: dict[str, set] = {}  # robot -> its cells changed since the last merge
+        self._rebuild: set = set()  # cells a robot's correction changed: merged afresh
+        self.corrections = 0  # robot corrections replayed on their map copies
         self._last_flush = -math.inf
         self.cycle_ms: list[float] = []
         self.cycle_cpu_ms: list[float] = []  # this thread's processor time of each cycle
@@ -291,6 +300,8 @@ class Coordinator:
         with self.timed("replay"):
             res = info.map.replay(op)
         self.replay_cpu_ms.append((time.thread_time() - c0) * 1e3)
+        if op.keyframe is not None:
+            info.atlas.add(op.keyframe, op.polygon, op.options)
         if not res.changed:
             return None
         info.map = res.map
@@ -300,11 +311,33 @@ class Coordinator:
         changed = tuple(res.map.cells[i] for i in sorted(res.changed))
         return MapDelta(op.cell_size, op.base_version, op.version, changed)
 
+    def on_robot_correction(self, rid: str, stamp_s: float, op: CorrectionOp) -> MapDelta:
+        """Replay a robot's correction (keyframes its loop closure moved) on the copy of
+        its map; the cells it changed as a delta (for the journal). The merged map's
+        cells it changed are merged afresh at the next ``flush``.
+
+        Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
+        self.now = max(self.now, stamp_s)
+        info = self.robot(rid)
+        if info.map is None:
+            raise DeltaGapError(f"correction of {rid} before any of its map")
+        with self.timed("replay"):
+            info.map, info.atlas, changed = replay_correction(info.map, info.atlas, op)
+        self.corrections += 1
+        self._check_behind(info)
+        idxs = {c.index for c in changed}
+        self._pending.setdefault(rid, set()).update(idxs)
+        self._rebuild |= idxs
+        return MapDelta(op.cell_size, op.base_version, op.version, tuple(changed))
+
     def on_robot_map(self, rid: str, pmap: GridPolyMap) -> None:
         """A robot's full map (resync): nothing it mapped is lost."""
         info = self.robot(rid)
         if info.map is not None and info.map.version >= pmap.version:
             return
+        if info.map is not None:  # corrections missed: cells that lost space are merged afresh
+            old = info.map.cells
+            self._rebuild |= {i for i, c in old.items() if not c.same_content(pmap.cells.get(i))}
         info.map = pmap
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(pmap.cells)
@@ -322,10 +355,11 @@ class Coordinator:
             return None
         t0, c0 = time.perf_counter(), time.thread_time()
         base = self.merged.version
+        rebuilt = self._rebuild_cells()
         queue = []
         for rid, idxs in sorted(self._pending.items()):
             m = self.robots[rid].map
-            queue += [m.cells[i] for i in sorted(idxs) if m is not None and i in m.cells]
+            queue += [m.cells[i] for i in sorted(idxs - rebuilt) if m is not None and i in m.cells]
         self._pending.clear()
         self._merge_batch(queue)
         delta = None
@@ -335,6 +369,38 @@ class Coordinator:
             self._index = None
         self.spent("merge", (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
         return delta
+
+    def _rebuild_cells(self) -> set:
+        """Merge afresh, from every robot's copy, the merged cells robots' corrections
+        changed (their neighbours' cells come along: borders are typed against them);
+        the indices rebuilt."""
+        if not self._rebuild:
+            return set()
+        todo, self._rebuild = self._rebuild, set()
+        reach = {(i + di, j + dj) for i, j in todo for di in (-1, 0, 1) for dj in (-1, 0, 1)}
+        cells = [
+            r.map.cells[ix]
+            for r in sorted(self.robots.values(), key=lambda r: r.id)
+            if r.map is not None
+            for ix in sorted(reach)
+            if ix in r.map.cells
+        ]
+        try:
+            fresh = GridPolyMap(self.merged.cell_size).merge_cells(cells, self._merge_options)
+        except PolyswarmError as e:  # the cells keep their content; robots' next changes retry
+            log.error("merged cells could not be rebuilt after a correction: %s", e)
+            return set()
+        version = self.merged.version + 1
+        out = dict(self.merged.cells)
+        for ix in todo:
+            new, old = fresh.map.cells.get(ix), out.get(ix)
+            if new is None and old is None:
+                continue
+            if new is not None and old is not None and new.same_content(old):
+                continue
+            out[ix] = (new or Cell(ix, self.merged.cell_size, ())).with_version(version)
+        self.merged = GridPolyMap(self.merged.cell_size, out, version)
+        return todo
 
     def spent(self, stage: str, wall_ms: float, cpu_ms: float) -> None:
         """Work done in the coordinator's thread: counted into the next cycle's time."""
@@ -724,10 +790,15 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         elif isinstance(msg, MapChunk) and item.payload is not None:
                             try:
                                 wire = item.payload
-                                if msg.kind == MapKind.MERGE:
-                                    with coord.timed("decode"):
-                                        op = decode_merge(wire)
-                                    replayed = coord.on_robot_merge(rid, item.stamp_s, op)
+                                if msg.kind in (MapKind.MERGE, MapKind.CORRECT):
+                                    if msg.kind == MapKind.MERGE:
+                                        with coord.timed("decode"):
+                                            op = decode_merge(wire)
+                                        replayed = coord.on_robot_merge(rid, item.stamp_s, op)
+                                    else:
+                                        with coord.timed("decode"):
+                                            fix = decode_correction(wire)
+                                        replayed = coord.on_robot_correction(rid, item.stamp_s, fix)
                                     # journaled as the cells it changed (restores need no merge)
                                     wire = None
                                     if replayed is not None and journal is not None:

@@ -30,6 +30,7 @@ from agents.seen import SeenObstacles
 from polyswarm.config import Config, SensorSource
 from polyswarm.control import ControlParams, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
+from polyswarm.follow import CorrectionOp
 from polyswarm.navgraph import NavGraph, clear_of
 from polyswarm.odometry import OdometryBuffer
 from polyswarm.planner import Planner
@@ -39,12 +40,14 @@ from polyswarm.se2 import transform_points
 from polyswarm.slam import PolySlam
 from protocols.keys import SwarmKeys, check_name
 from protocols.mapcodec import (
+    CORRECTION_TYPE,
+    DELTA_TYPE,
     MERGE_TYPE,
     decode_delta,
     decode_map,
     encode_cells_map,
     encode_delta,
-    encode_update,
+    encode_updates,
 )
 from protocols.messages import (
     MAX_STATUS_PATH_POINTS,
@@ -60,6 +63,8 @@ from protocols.messages import (
 )
 
 log = logging.getLogger(__name__)
+# the message type of an encoded map change -> the MapChunk kind it goes in
+_KINDS = {DELTA_TYPE: MapKind.DELTA, MERGE_TYPE: MapKind.MERGE, CORRECTION_TYPE: MapKind.CORRECT}
 
 POSE_PERIOD_S = 0.5  # pose messages to the coordinator (2 Hz)
 STATUS_PERIOD_S = 1.0
@@ -87,6 +92,7 @@ class Outbox:
     pose: Pose | None = None
     delta: MapDelta | None = None
     op: MergeOp | None = None  # the delta as the merge that made it (often smaller)
+    correction: CorrectionOp | None = None  # keyframes a loop closure moved, before ``op``
     status: RobotStatus | None = None
 
 
@@ -227,7 +233,7 @@ class RobotAgent:
         if step.keyframe:
             self.stats.keyframes += 1
             self.stats.slam_ms.append(step.timings_ms.get("total", 0.0))
-        out.delta, out.op = step.delta, step.op
+        out.delta, out.op, out.correction = step.delta, step.op, step.correction
         # 3. behaviour: the command, following the path around what the scan sees (farther
         #    from what the map does not explain: other robots, people)
         pts = scan_to_points(
@@ -568,11 +574,11 @@ def _send(
         sink.velocity(out.cmd[0], out.cmd[1], scan_seq, stamp_s)
     sent = 0
     if out.delta is not None:
-        d = out.delta
-        # the keyframe's merge when it is smaller than the cells it changed
-        what, payload = encode_update(d, out.op, wire)
-        kind = MapKind.MERGE if what == MERGE_TYPE else MapKind.DELTA
-        sent += bus.publish_map(me.map_delta, kind, payload, d.base_version, d.version, stamp_s)
+        # a correction's poses, then the keyframe's merge when it is smaller than the
+        # cells it changed (polyswarm.follow, protocols.mapcodec.encode_updates)
+        for what, base, ver, payload in encode_updates(out.delta, out.op, out.correction, wire):
+            kind = _KINDS[what]
+            sent += bus.publish_map(me.map_delta, kind, payload, base, ver, stamp_s)
     if out.pose is not None:
         sent += bus.publish(me.pose, out.pose, stamp_s)
     if out.status is not None:

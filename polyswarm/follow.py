@@ -1,20 +1,24 @@
 """The map follows the pose graph: after a loop closure moves keyframes, the cells their
 old and new placements touch are merged again, from every keyframe that reaches them,
-at the keyframes' current poses.
+at the keyframes' new poses.
 
 A robot's map is the union of its keyframe polygons placed at their poses. A map that
 only grows keeps every pose error made before a loop closed (ghost walls beside the
 walls it mapped again; on the ACES log, 58 % of the live map's wall length lies more
-than 10 cm from any wall of the map rebuilt at the optimised poses). Here, a keyframe
-whose content in the map is more than ``MOVE_M`` from where its pose now puts it is
-*moved*; the cells ``C`` that its old and its new placement touch are rebuilt from the
-keyframes (all of them, moved or not) whose placements reach ``C`` or its neighbours
-(their borders are typed against complete neighbours). Cells outside ``C`` stay
-bit for bit. Explored space is moved, never deleted: a cell that is empty after the
-rebuild is sent as an empty cell.
+than 10 cm from any wall of the map rebuilt at the optimised poses).
 
-The rebuilt cells go out as an ordinary cell delta, so a receiver's copy follows them
-exactly.
+The keyframes of a map are kept as they were merged (the polygon a ``MergeOp`` carried,
+on the wire's grid, and the pose it was merged at): an ``Atlas``. A *correction* is a
+list of (keyframe id, new pose); applying it (``apply_moves``) rebuilds the cells ``C``
+that the moved keyframes' old and new placements touch, from every keyframe of the
+atlas whose placement reaches ``C`` or its neighbours (borders are typed against
+complete neighbours). Cells outside ``C`` stay bit for bit. Explored space is moved,
+never deleted: a cell that is empty after the rebuild is sent as an empty cell.
+
+Applying a correction is a pure function of the map, the atlas and the poses, so a
+receiver holding the same atlas (it replayed the same merges) gets the same cells: a
+correction goes on the wire as poses, not geometry (``CorrectionOp``), with the digest
+of the cells it changed; a receiver whose cells differ fetches the map.
 """
 
 from __future__ import annotations
@@ -22,105 +26,328 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
+import shapely
 
-from polyswarm.errors import PolyswarmError
-from polyswarm.polymap import Cell, CellIndex, GridPolyMap, MergeOptions
+from polyswarm.errors import DeltaGapError, PolyswarmError
+from polyswarm.polymap import (
+    PRECISION_M,
+    Cell,
+    CellIndex,
+    GridPolyMap,
+    MergeOptions,
+    Ring,
+    TypedPolygon,
+    cells_digest,
+    snap_polygon,
+)
 from polyswarm.se2 import wrap
-from polyswarm.submap import StoredKeyframe, move_polygon
 
 log = logging.getLogger(__name__)
 
 MOVE_M = 0.03  # content this far from its keyframe's pose is moved (ghosts count at 0.1 m)
 REACH_M = 5.0  # a turn counts as the displacement of a point this far out (metres/radian)
+# poses on the wire: whole millimetres and 10 microradians (a point 10 m out moves 0.1 mm)
+POSE_UNITS_PER_M = 1000
+POSE_UNITS_PER_RAD = 100_000
+
+# keyframes merged per pass when cells are rebuilt, when one pass of all of them fails
+# (GEOS): the rebuilt cells depend on it, so it is part of the protocol
+FALLBACK_BATCH = 8
+QPose = tuple[int, int, int]  # a pose in wire units
 
 
-def moved(merged_at: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Which keyframes' content (placed at ``merged_at``) is more than ``MOVE_M`` from
-    their ``poses``."""
-    d = np.hypot(*(poses[:, :2] - merged_at[:, :2]).T)
-    turn = np.abs(wrap(poses[:, 2] - merged_at[:, 2]))
-    return d + REACH_M * turn > MOVE_M
+def quantize_pose(pose) -> QPose:
+    """A pose (x, y, theta) in wire units, theta wrapped to [-pi, pi)."""
+    x, y, th = (float(v) for v in pose[:3])
+    if not math.isfinite(x + y + th):
+        raise PolyswarmError(f"pose is not finite: {pose}")
+    return (
+        round(x * POSE_UNITS_PER_M),
+        round(y * POSE_UNITS_PER_M),
+        round(float(wrap(th)) * POSE_UNITS_PER_RAD),
+    )
 
 
-def _cell_range(pmap: GridPolyMap, kf: StoredKeyframe, pose) -> tuple[int, int, int, int]:
-    """Cells the keyframe's polygon can touch at ``pose`` (its bounding box's corners)."""
-    x0, y0 = kf.polygon.shell.xy.min(axis=0)
-    x1, y1 = kf.polygon.shell.xy.max(axis=0)
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    cx = np.array([x0, x1, x1, x0])
-    cy = np.array([y0, y0, y1, y1])
-    wx, wy = pose[0] + c * cx - s * cy, pose[1] + s * cx + c * cy
-    i0, j0 = pmap.cell_index(wx.min(), wy.min())
-    i1, j1 = pmap.cell_index(wx.max(), wy.max())
-    return i0, j0, i1, j1
+def frame_of(polygon: TypedPolygon) -> QPose:
+    """Where a merged keyframe polygon is held in an atlas: a frame at its first vertex,
+    along x (every end computes it from the polygon alone, so a merge carries no pose;
+    the sender tracks the frame as seen from the keyframe's pose)."""
+    x, y = polygon.shell.xy[0]
+    return (round(float(x) * POSE_UNITS_PER_M), round(float(y) * POSE_UNITS_PER_M), 0)
 
 
-def _cells(r: tuple[int, int, int, int]) -> set[CellIndex]:
-    return {(i, j) for i in range(r[0], r[2] + 1) for j in range(r[1], r[3] + 1)}
+def pose_of(q: QPose) -> np.ndarray:
+    """The pose in metres and radians that wire units ``q`` stand for (every receiver
+    computes the same floats)."""
+    return np.array([q[0] / POSE_UNITS_PER_M, q[1] / POSE_UNITS_PER_M, q[2] / POSE_UNITS_PER_RAD])
 
 
-def follow(
-    pmap: GridPolyMap,
-    keyframes: list[StoredKeyframe],
-    merged_at: np.ndarray,
-    options: MergeOptions,
-    batch: int = 8,
-) -> tuple[GridPolyMap, np.ndarray, dict]:
-    """The map with the cells of moved keyframes merged again; ``merged_at`` updated
-    (moved keyframes' content is now at their poses); and what it took."""
-    t0 = time.perf_counter()
-    poses = np.array([kf.pose for kf in keyframes])
-    merged_at = merged_at.copy()
-    go = np.flatnonzero(moved(merged_at, poses))
-    if len(go) == 0:
-        return pmap, merged_at, {"moved": 0, "cells": 0, "keyframes": 0, "ms": 0.0}
-    rebuild: set[CellIndex] = set()
-    for k in go:
-        rebuild |= _cells(_cell_range(pmap, keyframes[k], merged_at[k]))
-        rebuild |= _cells(_cell_range(pmap, keyframes[k], poses[k]))
-    reach = rebuild | {
-        (i + di, j + dj) for i, j in rebuild for di in (-1, 0, 1) for dj in (-1, 0, 1)
-    }
-    i_lo, j_lo = min(i for i, _ in reach), min(j for _, j in reach)
-    i_hi, j_hi = max(i for i, _ in reach), max(j for _, j in reach)
-    used = []
-    for k, kf in enumerate(keyframes):
-        r = _cell_range(pmap, kf, poses[k])
-        if r[2] < i_lo or r[0] > i_hi or r[3] < j_lo or r[1] > j_hi:
+@dataclass(frozen=True)
+class CorrectionOp:
+    """A map change sent as the poses that made it: moving keyframes by ``moves``
+    (keyframe id, the step from its pose in the receiver's atlas to its new pose, in
+    wire units; ids ascending) brought the map from ``base_version`` to ``version``
+    (always one more), changing the cells ``digest`` hashes."""
+
+    cell_size: float
+    base_version: int
+    version: int
+    moves: tuple[tuple[int, QPose], ...]
+    digest: int
+
+
+def _moved_polygon(poly: TypedPolygon, q0: QPose, q1: QPose) -> TypedPolygon | None:
+    """``poly`` (placed at ``q0``) placed at ``q1`` instead, on the 10 um grid; None if it
+    collapses there."""
+    if q0 == q1:
+        return poly
+    p0, p1 = pose_of(q0), pose_of(q1)
+    d = p1[2] - p0[2]
+    c, s = math.cos(d), math.sin(d)
+
+    def move(xy: np.ndarray) -> np.ndarray:
+        x, y = xy[:, 0] - p0[0], xy[:, 1] - p0[1]
+        return np.stack([c * x - s * y + p1[0], s * x + c * y + p1[1]], axis=1)
+
+    moved = TypedPolygon(
+        Ring(move(poly.shell.xy), poly.shell.types),
+        tuple(Ring(move(h.xy), h.types) for h in poly.holes),
+    )
+    return snap_polygon(moved, 1)
+
+
+@dataclass(frozen=True)
+class Placed:
+    """A keyframe polygon where its atlas places it: as a polygon, as shapely, and its
+    bounding box (x0, y0, x1, y1)."""
+
+    polygon: TypedPolygon | None
+    geom: shapely.Geometry | None
+    box: tuple[float, ...]
+
+
+class Atlas:
+    """The keyframes a map was merged from, as merged (the polygon, on the wire's grid,
+    and the pose it was placed at), and where each is placed now. Both ends of a link
+    keep one per robot map: the robot as it merges, the receiver as it replays."""
+
+    def __init__(self) -> None:
+        self.merged: dict[int, tuple[TypedPolygon, QPose]] = {}  # id -> polygon, its pose
+        self.poses: dict[int, QPose] = {}  # id -> where it is placed now
+        self._placed: dict[int, Placed] = {}
+        self.options: MergeOptions | None = None  # the merges' options (one per robot)
+
+    def __len__(self) -> int:
+        return len(self.merged)
+
+    def __contains__(self, kid: int) -> bool:
+        return kid in self.merged
+
+    def add(self, kid: int, polygon: TypedPolygon, options: MergeOptions) -> None:
+        """Keyframe ``kid``'s merged polygon (a replayed merge), held at ``frame_of`` it."""
+        pose = frame_of(polygon)
+        self.merged[kid] = (polygon, pose)
+        self.poses[kid] = pose
+        self._placed.pop(kid, None)
+        self.options = options
+
+    def placed(self, kid: int) -> Placed:
+        """The keyframe's polygon at its current pose (None if it collapsed there)."""
+        if kid not in self._placed:
+            poly, q0 = self.merged[kid]
+            moved = _moved_polygon(poly, q0, self.poses[kid])
+            if moved is None:
+                self._placed[kid] = Placed(None, None, (math.inf, math.inf, -math.inf, -math.inf))
+            else:
+                lo, hi = moved.shell.xy.min(axis=0), moved.shell.xy.max(axis=0)
+                geom = moved.to_shapely()  # valid: snap_polygon checked it
+                shapely.prepare(geom)
+                self._placed[kid] = Placed(moved, geom, (lo[0], lo[1], hi[0], hi[1]))
+        return self._placed[kid]
+
+    def move(self, kid: int, pose: QPose) -> None:
+        if self.poses[kid] != pose:
+            self.poses[kid] = pose
+            self._placed.pop(kid, None)
+
+    def copy(self) -> Atlas:
+        out = Atlas()
+        out.merged = dict(self.merged)
+        out.poses = dict(self.poses)
+        out._placed = dict(self._placed)
+        out.options = self.options
+        return out
+
+
+def choose_moves(atlas: Atlas, poses: dict[int, np.ndarray]) -> dict[int, QPose]:
+    """The keyframes whose content (in the atlas) is more than ``MOVE_M`` from where
+    ``poses`` (of their atlas frames) put it (a point ``REACH_M`` out counts for a
+    turn), with their new poses."""
+    out = {}
+    for kid, pose in poses.items():
+        if kid not in atlas.poses:
             continue
-        if _cells(r) & reach:
-            used.append(k)
-    fresh = GridPolyMap(pmap.cell_size)
-    polys = [move_polygon(keyframes[k].polygon, poses[k]) for k in used]
-    for k0 in range(0, len(polys), batch):
-        try:
-            fresh = fresh.merge_many(polys[k0 : k0 + batch], options).map
-        except PolyswarmError:
-            for poly in polys[k0 : k0 + batch]:
-                try:
-                    fresh = fresh.merge(poly, options).map
-                except PolyswarmError as e:  # counted by the caller's map as before
-                    log.warning("a keyframe was not merged again: %s", e)
+        now = pose_of(atlas.poses[kid])
+        d = math.hypot(pose[0] - now[0], pose[1] - now[1])
+        turn = abs(float(wrap(pose[2] - now[2])))
+        if d + REACH_M * turn > MOVE_M:
+            q = quantize_pose(pose)  # theta a step from the old one: no jump of 2 pi
+            th = atlas.poses[kid][2] + round(float(wrap(pose[2] - now[2])) * POSE_UNITS_PER_RAD)
+            out[kid] = (q[0], q[1], th)
+    return out
+
+
+def _minus(a: QPose, b: QPose) -> QPose:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def _plus(a: QPose, b: QPose) -> QPose:
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+def _cells_of(pmap: GridPolyMap, placed: Placed) -> set[CellIndex]:
+    """The cells the placed polygon reaches."""
+    box = placed.box
+    if placed.geom is None:
+        return set()
+    i0, j0 = pmap.cell_index(box[0], box[1])
+    i1, j1 = pmap.cell_index(box[2], box[3])
+    ij = [(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)]
+    cs = pmap.cell_size
+    a = np.array(ij, dtype=float) * cs
+    hit = shapely.intersects(placed.geom, shapely.box(a[:, 0], a[:, 1], a[:, 0] + cs, a[:, 1] + cs))
+    return {ix for ix, h in zip(ij, hit, strict=True) if h}
+
+
+def apply_moves(
+    pmap: GridPolyMap, atlas: Atlas, moves: dict[int, QPose]
+) -> tuple[GridPolyMap, list[Cell], dict]:
+    """Move keyframes of ``atlas`` (updated in place) and rebuild the cells they touch.
+
+    Returns the map at ``pmap.version + 1``, the cells that changed (the digest's input),
+    and what it took. Raises ``PolyswarmError`` for a keyframe the atlas does not hold."""
+    t0 = time.perf_counter()
+    unknown = [k for k in moves if k not in atlas]
+    if unknown:
+        raise PolyswarmError(f"correction moves keyframes this map does not hold: {unknown[:5]}")
+    if atlas.options is None:
+        raise PolyswarmError("correction of a map with no merged keyframes")
+    rebuild: set[CellIndex] = set()
+    for kid in sorted(moves):
+        rebuild |= _cells_of(pmap, atlas.placed(kid))
+        atlas.move(kid, moves[kid])
+        rebuild |= _cells_of(pmap, atlas.placed(kid))
     version = pmap.version + 1
+    cs = pmap.cell_size
     cells = dict(pmap.cells)
-    changed = 0
-    for ix in rebuild:
-        new = fresh.cells.get(ix)
-        old = cells.get(ix)
+    changed = []
+    fresh, merged = _rebuild_window(pmap, atlas, rebuild)
+    for ix in sorted(rebuild):
+        new, old = fresh.cells.get(ix), cells.get(ix)
         if new is None and old is None:
             continue
         if new is not None and old is not None and new.same_content(old):
             continue
-        cells[ix] = (new or Cell(ix, pmap.cell_size, ())).with_version(version)
-        changed += 1
-    merged_at[go] = poses[go]
-    out = GridPolyMap(pmap.cell_size, cells, version) if changed else pmap
+        cells[ix] = (new or Cell(ix, cs, ())).with_version(version)
+        changed.append(cells[ix])
     info = {
-        "moved": len(go),
-        "cells": changed,
-        "keyframes": len(used),
+        "moved": len(moves),
+        "cells": len(changed),
+        "keyframes": merged,
         "ms": (time.perf_counter() - t0) * 1e3,
     }
-    return out, merged_at, info
+    return GridPolyMap(cs, cells, version), changed, info
+
+
+def _rebuild_window(
+    pmap: GridPolyMap, atlas: Atlas, rebuild: set[CellIndex]
+) -> tuple[GridPolyMap, int]:
+    """The cells ``rebuild`` merged afresh from every keyframe reaching them, clipped to
+    them and their ring of neighbour cells (the borders are typed against complete
+    neighbours); and how many keyframes that took."""
+    cs = pmap.cell_size
+    ring = sorted({(i + a, j + b) for i, j in rebuild for a in (-1, 0, 1) for b in (-1, 0, 1)})
+    ij = np.array(ring, dtype=float) * cs
+    area = shapely.union_all(
+        shapely.box(ij[:, 0], ij[:, 1], ij[:, 0] + cs, ij[:, 1] + cs), grid_size=PRECISION_M
+    )
+    shapely.prepare(area)
+    box = area.bounds
+    kids = []
+    for kid in sorted(atlas.merged):
+        b = atlas.placed(kid).box
+        if b[0] < box[2] and b[2] > box[0] and b[1] < box[3] and b[3] > box[1]:
+            kids.append(kid)
+    near = [atlas.placed(k) for k in kids]
+    hits = shapely.intersects(area, [p.geom for p in near]) if near else []
+    placed = [p for p, hit in zip(near, hits, strict=True) if hit]
+    polys, geoms = [p.polygon for p in placed], [p.geom for p in placed]
+    fresh = GridPolyMap(cs)
+    try:  # all at once: one union of overlapping keyframes costs about one merge
+        return fresh.merge_many(polys, atlas.options, area, geoms).map, len(polys)
+    except PolyswarmError as e:
+        log.info("cells merged again in batches: %s", e)
+    for k0 in range(0, len(polys), FALLBACK_BATCH):
+        batch = slice(k0, k0 + FALLBACK_BATCH)
+        try:
+            fresh = fresh.merge_many(polys[batch], atlas.options, area, geoms[batch]).map
+        except PolyswarmError:
+            for poly, geom in zip(polys[batch], geoms[batch], strict=True):
+                try:
+                    fresh = fresh.merge_many([poly], atlas.options, area, [geom]).map
+                except PolyswarmError as e:  # the same on every end of the link
+                    log.warning("a keyframe was not merged again: %s", e)
+    return fresh, len(polys)
+
+
+def correct(
+    pmap: GridPolyMap, atlas: Atlas, poses: dict[int, np.ndarray]
+) -> tuple[GridPolyMap, CorrectionOp | None, dict]:
+    """The sender's side: move the keyframes whose ``poses`` moved them, as a
+    ``CorrectionOp`` (None when nothing moved)."""
+    moves = choose_moves(atlas, poses)
+    if not moves:
+        return pmap, None, {"moved": 0, "cells": 0, "keyframes": 0, "ms": 0.0}
+    steps = {k: _minus(q, atlas.poses[k]) for k, q in moves.items()}
+    out, changed, info = apply_moves(pmap, atlas, moves)
+    op = CorrectionOp(
+        pmap.cell_size,
+        pmap.version,
+        out.version,
+        tuple(sorted(steps.items())),
+        cells_digest(changed),
+    )
+    return out, op, info
+
+
+def replay_correction(
+    pmap: GridPolyMap, atlas: Atlas, op: CorrectionOp
+) -> tuple[GridPolyMap, Atlas, list[Cell]]:
+    """The receiver's side: ``op`` applied to a bit-identical copy of the sender's map
+    and atlas; returns the new map, the new atlas (``atlas`` is not touched) and the
+    cells that changed. Raises ``DeltaGapError`` when it does not apply (another
+    version, an unknown keyframe, other cells than the sender's): fetch the map."""
+    if abs(op.cell_size - pmap.cell_size) > 1e-9:
+        raise DeltaGapError(f"correction cell size {op.cell_size} m, map {pmap.cell_size} m")
+    if op.base_version != pmap.version or op.version != op.base_version + 1:
+        raise DeltaGapError(
+            f"correction {op.base_version} -> {op.version} does not apply to version {pmap.version}"
+        )
+    mine = atlas.copy()
+    try:
+        moves = {k: _plus(mine.poses[k], d) for k, d in op.moves if k in mine}
+        if len(moves) != len(op.moves):
+            raise PolyswarmError("it moves keyframes this map does not hold")
+        out, changed, _ = apply_moves(pmap, mine, moves)
+    except PolyswarmError as e:
+        raise DeltaGapError(f"correction does not apply: {e}") from e
+    got = cells_digest(changed)
+    if got != op.digest:
+        raise DeltaGapError(
+            f"correction {op.base_version} -> {op.version} gave other cells than the "
+            f"sender's (digest {got:08x}, sent {op.digest:08x})"
+        )
+    return out, mine, changed

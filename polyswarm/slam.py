@@ -5,6 +5,7 @@
     step.pose                  # (x, y, theta) estimate in the map frame
     step.delta                 # on keyframes: the map cells that changed
     step.op                    # ...and the merge that changed them (polymap.MergeOp)
+    step.correction            # ...after a loop closure moved keyframes (follow.CorrectionOp)
     slam.map                   # the robot's GridPolyMap
 
 Only keyframes (moved ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` since
@@ -13,10 +14,12 @@ the last one) are aligned and merged; other scans get the odometry prediction.
 Beyond the thesis: ICP matches against the obstacle vectors of the nearby keyframes
 rather than the merged map (``polyswarm.submap`` says why), and each keyframe is a node
 of a pose graph whose loop edges (a scan matched against an old part of the map) are
-optimised as they are found (``polyswarm.posegraph``). The merged map only grows, so a
-correction moves the robot and the keyframes it matches against, not what it already
-merged; ``rebuild_map()`` merges every keyframe afresh at its optimised pose (offline
-runs do that at the end), and ``trajectory()`` gives every scan's optimised pose.
+optimised as they are found (``polyswarm.posegraph``). With ``slam.map_follows_graph``
+the map follows each correction (``polyswarm.follow``): the cells of the keyframes it
+moved are merged again; otherwise a correction moves the robot and the keyframes it
+matches against, not what it already merged. ``rebuild_map()`` merges every keyframe
+afresh at its optimised pose (offline runs), and ``trajectory()`` gives every scan's
+optimised pose.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ import numpy as np
 
 from polyswarm.config import IcpReference, SlamConfig
 from polyswarm.errors import PolyswarmError
-from polyswarm.follow import follow
+from polyswarm.follow import Atlas, CorrectionOp, correct, pose_of
 from polyswarm.icp import IcpResult, PointToVectorIcp
 from polyswarm.keyframe import keyframe_polygon
 from polyswarm.loopsearch import correlative_search
@@ -77,6 +80,9 @@ class SlamStep:
     keyframe: bool
     delta: MapDelta | None = None
     op: MergeOp | None = None  # the same change as the merge that made it
+    # a loop closure moved keyframes before the merge: the delta covers both, sent as this
+    # correction then ``op`` (its base is the correction's version)
+    correction: CorrectionOp | None = None
     icp: IcpResult | None = None
     refined: str = ""  # "refined", "projected" or "raw" on keyframes
     timings_ms: dict[str, float] = field(default_factory=dict)
@@ -162,11 +168,12 @@ class PolySlam:
         self._steps: list[tuple[int, np.ndarray]] = []  # every scan: (keyframe, offset)
         self._last_loop = self._last_search = -(10**9)  # keyframes of the last loop, search
         self._travel_since_loop_m = 0.0  # distance driven since the last loop edge
-        # the map follows the pose graph (polyswarm.follow): where each keyframe's content
-        # sits in the map, and what each correction cost
-        self._merged_at = np.zeros((0, 3))
+        # the map follows the pose graph (polyswarm.follow): the keyframes as merged and
+        # where they are placed now, this step's correction, and what each one cost
+        self.atlas = Atlas()
+        self._frames: dict[int, np.ndarray] = {}  # keyframe -> its atlas frame, seen from it
         self._follows = cfg.map_follows_graph
-        self._followed = False  # this step's correction changed the map
+        self._correction: CorrectionOp | None = None
         self.corrections: list[dict] = []
 
     def resume(self, pmap: GridPolyMap, pose, odom=None) -> None:
@@ -184,7 +191,8 @@ class PolySlam:
         self.store = KeyframeStore(sub.keyframes, sub.radius_m, sub.recent)
         # the map holds keyframes the store does not: rebuilding cells from the store
         # alone would drop them, so a resumed map no longer follows the graph
-        self._merged_at = np.zeros((0, 3))
+        self.atlas = Atlas()
+        self._frames = {}
         self._follows = False
         self.graph = PoseGraph()
         self._steps = []
@@ -257,26 +265,38 @@ class PolySlam:
         t["refine"] = time.perf_counter()
         # 7. merge into the robot's map, its vertices on the wire's grid; the changed cells
         # are the delta, and the merge itself is a smaller one
+        # (after a correction, the delta starts before it)
         base, op = self.map.version, None
-        followed, self._followed = self._followed, False
-        if followed:  # the correction's cells and this merge go out as one cell delta
+        correction, self._correction = self._correction, None
+        if correction is not None:
             base = start_version
         news = trim_keyframe(kf, self.map, self.merge_options) if self.cfg.trim_merges else kf
         snapped = snap_polygon(news, self._quantum_u) if self._quantum_u else None
         try:
+            before = self.map.version
             merged = self.map.merge(news if snapped is None else snapped, self.merge_options)
             self.map = merged.map
-            if snapped is not None and merged.changed and not followed:
+            if snapped is not None and merged.changed:
                 digest = cells_digest(merged.map.cells[i] for i in merged.changed)
+                kid = len(self.store) if self._follows else None
                 op = MergeOp(
-                    self.map.cell_size, base, self.map.version, snapped, self.merge_options, digest
+                    self.map.cell_size,
+                    before,
+                    self.map.version,
+                    snapped,
+                    self.merge_options,
+                    digest,
+                    kid,
                 )
+                if kid is not None:  # what every receiver's atlas holds after replaying op
+                    self.atlas.add(kid, snapped, self.merge_options)
+                    # the atlas holds it at a frame of its own: seen from the keyframe
+                    self._frames[kid] = relative(pose, pose_of(self.atlas.poses[kid]))
         except PolyswarmError as e:  # never silently: counted, logged, pose still tracked
             self.rejected_keyframes += 1
             log.warning("keyframe %d not merged: %s", self.keyframes, e)
         t["merge"] = time.perf_counter()
         self.store.add(pose, kf)
-        self._merged_at = np.vstack([self._merged_at, np.asarray(pose, float)[None, :3]])
         if self.keep_trajectory:
             self._steps.append((len(self.graph) - 1, np.zeros(3)))
         delta = self.map.delta_since(base) if self.map.version != base else None
@@ -292,7 +312,7 @@ class PolySlam:
             ms[name] = (t[name] - prev) * 1e3
             prev = t[name]
         ms["total"] = (t["merge"] - t["start"]) * 1e3
-        return SlamStep(self.pose.copy(), True, delta, op, res, how, ms)
+        return SlamStep(self.pose.copy(), True, delta, op, correction, res, how, ms)
 
     def _sees_new_space(self, points, pose) -> bool:
         """Do ``keyframe_novelty`` of the scan's beams end (pulled back by
@@ -420,16 +440,13 @@ class PolySlam:
 
     def _follow(self) -> None:
         """Merge again the cells of keyframes the optimisation moved (polyswarm.follow)."""
-        before = self.map.version
-        self.map, self._merged_at, info = follow(
-            self.map,
-            self.store.keyframes,
-            self._merged_at,
-            self.merge_options,
-            self.cfg.rebuild_batch,
-        )
-        self._followed |= self.map.version != before
-        if info["moved"]:
+        kfs = self.store.keyframes
+        poses = {k: compose(kfs[k].pose, f) for k, f in self._frames.items()}
+        self.map, op, info = correct(self.map, self.atlas, poses)
+        if op is not None:
+            if self._correction is not None:  # one optimisation per keyframe: never here
+                raise PolyswarmError("two corrections in one keyframe step")
+            self._correction = op
             self.corrections.append(info)
 
     def _loop_accepted(self, m: IcpResult, pose, n_points: int, window_m: float) -> bool:

@@ -7,6 +7,7 @@ Layout (normative text in ``PROTOCOL.md``)::
     delta = msgpack {"t": "polymap-delta", "v": 1, "cs": cell size (units), "base": n, "ver": n,
                      "cells": bin}
     merge = msgpack {"t": "polymap-merge", "v": 1, "b": bin}     (a MergeOp, see below)
+    correct = msgpack {"t": "polymap-correct", "v": 1, "b": bin}  (a CorrectionOp, below)
 
 A full map carries the explored space as polygons across cell borders (the receiver
 cuts them into cells again; sectors on cell borders are implied). A delta carries the
@@ -30,6 +31,14 @@ sender's map, ``polymap.MergeOp``) is one varint sequence::
        opts: the MergeOptions in units, in field order; q: the polygon's quantum (units)
        ring: n zz(x0) zz(y0) h[0..n-2] zz(dy)[0..n-2] type_n-1
              h = zz(dx) << 2 | type; vertices in units = q * (x, y), absolute
+       then, from a map that follows its pose graph: id (the keyframe's pose-graph id)
+
+A correction (keyframes moved by a loop closure, ``polyswarm.follow.CorrectionOp``)::
+
+    b: cs base digest n  (did zz(dx) zz(dy) zz(dtheta))[n]
+       did: the id's step from the previous entry's (the first from -1: ids ascend);
+       dx dy dtheta: the keyframe's move from where the receiver holds it, in mm and
+       10 urad; the version is base + 1
 
 A unit is 10 micrometres (the map's precision grid, so deltas lose nothing); ``q`` is the
 largest quantum dividing all coordinates (100 units for whole maps shared at 1 mm and for
@@ -50,6 +59,7 @@ import numpy as np
 import shapely
 
 from polyswarm.errors import DecodeError, PolyswarmError
+from polyswarm.follow import CorrectionOp
 from polyswarm.polymap import (
     PRECISION_M,
     Cell,
@@ -68,6 +78,10 @@ FORMAT_VERSION = 1
 MAP_TYPE = "polymap"
 DELTA_TYPE = "polymap-delta"
 MERGE_TYPE = "polymap-merge"
+CORRECTION_TYPE = "polymap-correct"
+MAX_POSE_UNITS = 2**40  # mm: poses farther out are refused
+MAX_ANGLE_UNITS = 400_000  # 10 urad: |theta| <= 4 rad (a sender wraps it to pi)
+MAX_MOVES = 2**20  # keyframes one correction may move
 UNITS_PER_M = POLYMAP_UNITS_PER_M  # wire coordinates are integers of 10 um (PRECISION_M)
 MAX_OPTION_UNITS = UNITS_PER_M  # merge options above 1 m are refused
 MAX_COORD_UNITS = 2**40  # about 11,000 km: coordinates and steps beyond are refused
@@ -176,21 +190,73 @@ def encode_merge(op: MergeOp) -> bytes:
         vals.append(
             np.concatenate([[len(v)], zigzag(v[0]), h, zigzag(d[:, 1]), [int(r.types[-1])]])
         )
+    if op.keyframe is not None:
+        vals.append(np.array([op.keyframe], dtype=np.int64))
     body = encode_varints(np.concatenate(vals).astype(np.uint64))
     return msgpack.packb({"t": MERGE_TYPE, "v": FORMAT_VERSION, "b": body})
+
+
+def encode_correction(op: CorrectionOp) -> bytes:
+    """A correction: the keyframes a loop closure moved, as poses."""
+    if op.version != op.base_version + 1:
+        raise PolyswarmError("a correction steps the map's version by one")
+    rows = np.array([[k, *q] for k, q in op.moves], dtype=np.int64).reshape(-1, 4)
+    ids = np.diff(np.concatenate([[-1], rows[:, 0]]))
+    if (ids <= 0).any():
+        raise PolyswarmError("a correction's keyframe ids must ascend")
+    cols = np.column_stack([ids.astype(np.uint64), zigzag(rows[:, 1:]).reshape(-1, 3)])
+    head = [_cell_units(op.cell_size), op.base_version, op.digest, len(rows)]
+    body = encode_varints(np.concatenate([np.array(head, dtype=np.uint64), cols.ravel()]))
+    return msgpack.packb({"t": CORRECTION_TYPE, "v": FORMAT_VERSION, "b": body})
 
 
 def encode_update(
     delta: MapDelta, op: MergeOp | None, cells: bytes | None = None
 ) -> tuple[str, bytes]:
     """What a robot sends for one map change: the merge when it is the smaller, else the
-    changed cells (``cells``: the delta already encoded). Returns (``MERGE_TYPE`` or
-    ``DELTA_TYPE``, payload)."""
+    changed cells (``cells``: the delta already encoded). A merge of a keyframe (a map
+    that follows its pose graph) always goes as the merge: every receiver must hold the
+    keyframe to follow later corrections. Returns (``MERGE_TYPE`` or ``DELTA_TYPE``,
+    payload)."""
+    if op is not None and op.keyframe is not None:
+        return MERGE_TYPE, encode_merge(op)
     cells = encode_delta(delta) if cells is None else cells
     if op is None:
         return DELTA_TYPE, cells
     merge = encode_merge(op)
     return (MERGE_TYPE, merge) if len(merge) < len(cells) else (DELTA_TYPE, cells)
+
+
+def encode_updates(
+    delta: MapDelta,
+    op: MergeOp | None,
+    correction: CorrectionOp | None = None,
+    cells: bytes | None = None,
+) -> list[tuple[str, int, int, bytes]]:
+    """What a robot sends for one keyframe step, in order: (message type, base version,
+    version, payload). After a loop closure (``correction``) the correction goes first,
+    then the merge (or the cells it changed)."""
+    if correction is None:
+        what, payload = encode_update(delta, op, cells)
+        return [(what, delta.base_version, delta.version, payload)]
+    out = [
+        (
+            CORRECTION_TYPE,
+            correction.base_version,
+            correction.version,
+            encode_correction(correction),
+        )
+    ]
+    if delta.version > correction.version:
+        rest = MapDelta(
+            delta.cell_size,
+            correction.version,
+            delta.version,
+            tuple(c for c in delta.cells if c.version > correction.version),
+        )
+        what, payload = encode_update(rest, op)
+        out.append((what, rest.base_version, rest.version, payload))
+    return out
 
 
 def encode_cells_map(pmap: GridPolyMap) -> bytes:
@@ -319,6 +385,7 @@ def decode_merge(data: bytes) -> MergeOp:
         if int(np.abs(v).max()) > MAX_COORD_UNITS // q:
             raise DecodeError(f"ring {k}: vertex too far from the origin")
         rings.append(Ring(v * q / UNITS_PER_M, np.append(ty, last).astype(np.uint8)))
+    keyframe = r.one("keyframe id", 0, 2**62) if r.pos != len(r.vals) else None
     if r.pos != len(r.vals):
         raise DecodeError(f"{len(r.vals) - r.pos} trailing values after the last ring")
     poly = TypedPolygon(rings[0], tuple(rings[1:]))
@@ -326,7 +393,39 @@ def decode_merge(data: bytes) -> MergeOp:
         poly.validate()
     except PolyswarmError as e:
         raise DecodeError(f"merge polygon: {e}") from None
-    return MergeOp(cell_u / UNITS_PER_M, base, version, poly, MergeOptions(*opts), digest)
+    return MergeOp(cell_u / UNITS_PER_M, base, version, poly, MergeOptions(*opts), digest, keyframe)
+
+
+def _pose(v: np.ndarray, what: str) -> tuple[int, int, int]:
+    x, y, th = (int(a) for a in v)
+    if max(abs(x), abs(y)) > MAX_POSE_UNITS or abs(th) > MAX_ANGLE_UNITS:
+        raise DecodeError(f"{what} out of range: {(x, y, th)}")
+    return x, y, th
+
+
+def decode_correction(data: bytes) -> CorrectionOp:
+    """Decode a correction; any defect raises ``DecodeError``."""
+    obj = _unpack(data, CORRECTION_TYPE)
+    body = obj.get("b")
+    if not isinstance(body, bytes):
+        raise DecodeError("field 'b' must be binary")
+    r = _Reader(decode_varints(body))
+    cell_u = r.one("cell size", 1, MAX_CELL_UNITS)
+    base = r.one("base version", 0, 2**62 - 1)
+    digest = r.one("digest", 0, 2**32 - 1)
+    n = r.one("keyframe count", 1, min(MAX_MOVES, len(r.vals)))
+    vals = r.take(4 * n, "keyframe moves").reshape(n, 4)
+    if r.pos != len(r.vals):
+        raise DecodeError(f"{len(r.vals) - r.pos} trailing values after the last keyframe")
+    # bounded before summing, so that no int64 overflows (2**20 steps of 2**40)
+    if ((vals[:, 0] < 1) | (vals[:, 0] > MAX_POSE_UNITS)).any():
+        raise DecodeError("keyframe id steps must be 1 to 2**40")
+    ids = np.cumsum(vals[:, 0].astype(np.int64)) - 1
+    steps = unzigzag(vals[:, 1:])
+    moves = tuple(
+        (int(k), _pose(d, f"move of keyframe {k}")) for k, d in zip(ids, steps, strict=True)
+    )
+    return CorrectionOp(cell_u / UNITS_PER_M, base, base + 1, moves, digest)
 
 
 def decode_any_map(data: bytes) -> GridPolyMap:

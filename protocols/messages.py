@@ -64,6 +64,7 @@ class MissionState(StrEnum):
 class MapKind(StrEnum):
     DELTA = "delta"  # a polymap-delta (PROTOCOL.md 3.3)
     MERGE = "merge"  # a polymap-merge (3.4): the keyframe polygon that changed the map
+    CORRECT = "correct"  # a polymap-correct (3.5): keyframes a loop closure moved
     MAP = "map"  # a full polymap (3.2), the reply of a map queryable
 
 

@@ -298,3 +298,33 @@ def test_decoding_never_touches_an_existing_map():
     with pytest.raises(DecodeError):
         pmap.apply_delta(decode_delta(b"garbage"))
     assert dict(pmap.cells) == before
+
+
+def test_golden_correction_vector_replays_to_its_cells():
+    """A receiver that replayed the golden keyframe merges follows the golden correction
+    to the cells its description lists (the atlas from the merges alone)."""
+    from polyswarm.follow import Atlas, replay_correction
+    from protocols.golden.make_golden import golden_correction
+    from protocols.mapcodec import decode_correction, encode_correction
+
+    before, _, ops, fix, _ = golden_correction()
+    assert encode_correction(fix) == (GOLDEN / "correct_v1.bin").read_bytes()
+    assert encode_merge(ops[1]) == (GOLDEN / "merge_keyframe_v1.bin").read_bytes()
+    pmap, atlas = GridPolyMap(2.0), Atlas()
+    for k, op in enumerate(ops):
+        raw = (GOLDEN / "merge_keyframe_v1.bin").read_bytes() if k == 1 else encode_merge(op)
+        got = decode_merge(raw)
+        assert got.keyframe == k
+        pmap = pmap.replay(got).map
+        atlas.add(got.keyframe, got.polygon, got.options)
+    assert pmap.version == before.version
+    c = json.loads((GOLDEN / "correct_v1.json").read_text())
+    back = decode_correction((GOLDEN / "correct_v1.bin").read_bytes())
+    assert [[k, list(d)] for k, d in back.moves] == c["moves"] and back.digest == c["digest"]
+    after, _, changed = replay_correction(pmap, atlas, back)
+    assert after.version == c["version"]
+    cells = [
+        {"index": list(x.index), "polygons": describe_polygons(x.polygons)}
+        for x in sorted(changed, key=lambda x: x.index)
+    ]
+    assert cells == c["cells"]

@@ -13,6 +13,7 @@ def test_no_decoder_lets_anything_but_its_error_escape():
         "map",
         "delta",
         "merge",
+        "correction",
         "whole map as cells",
         "ros-laserscan",
         "ros-odometry",

@@ -41,6 +41,7 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.errors import DeltaGapError
+from polyswarm.follow import Atlas, CorrectionOp, replay_correction
 from polyswarm.gridmap import CountingGrid
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, cells_digest
 from polyswarm.scan import LaserScan
@@ -81,8 +82,10 @@ class Recording:
     """Keyframes of one run and the final PolyMap of each robot.
 
     Every update is also decoded and applied to a receiver's copy of the robot's map, as
-    the coordinator does: a merge is replayed (timed: the receiver's cost of the smaller
-    messages) and must give the sender's cells bit for bit."""
+    the coordinator does: a merge or a correction (a loop closure's moved keyframes) is
+    replayed (timed: the receiver's cost of the smaller messages) and must give the
+    sender's cells bit for bit; one that does not is counted, and the receiver takes the
+    cells (the coordinator would fetch the map)."""
 
     name: str
     keyframes: list[Keyframe] = field(default_factory=list)
@@ -91,8 +94,11 @@ class Recording:
     free_range_m: float = 3.0
     map_precision_m: float = 0.001  # whole maps are encoded at this grid (the config's)
     copies: dict[str, GridPolyMap] = field(default_factory=dict)
+    atlases: dict[str, Atlas] = field(default_factory=dict)
     replay_ms: list[float] = field(default_factory=list)
     replay_failures: int = 0
+    correction_ms: list[float] = field(default_factory=list)  # the receiver's, per correction
+    correction_bytes: int = 0
 
     def add(
         self,
@@ -102,28 +108,18 @@ class Recording:
         pose,
         delta: MapDelta,
         op: MergeOp | None = None,
+        correction: CorrectionOp | None = None,
     ) -> None:
-        from protocols.mapcodec import (
-            MERGE_TYPE,
-            decode_delta,
-            decode_merge,
-            encode_delta,
-            encode_update,
-        )
+        from protocols.mapcodec import encode_delta, encode_updates
 
         cells = encode_delta(delta)
-        what, raw = encode_update(delta, op, cells)
+        sent = encode_updates(delta, op, correction, cells)
         copy = self.copies.get(robot) or GridPolyMap(delta.cell_size)
-        if what == MERGE_TYPE:
-            t0 = time.perf_counter()
-            try:
-                copy = copy.replay(decode_merge(raw)).map
-            except DeltaGapError:  # the coordinator would fetch the map: take the cells
-                self.replay_failures += 1
-                copy = copy.apply_delta(decode_delta(cells))
-            self.replay_ms.append((time.perf_counter() - t0) * 1e3)
-        else:
-            copy = copy.apply_delta(decode_delta(raw))
+        try:
+            copy = self._receive(robot, copy, sent)
+        except DeltaGapError:  # the coordinator would fetch the map: take the cells
+            self.replay_failures += 1
+            copy = (self.copies.get(robot) or GridPolyMap(delta.cell_size)).apply_delta(delta)
         self.copies[robot] = copy
         self.keyframes.append(
             Keyframe(
@@ -131,11 +127,40 @@ class Recording:
                 t_s,
                 scan,
                 np.asarray(pose, float),
-                len(raw),
-                len(zlib.compress(raw)),
+                sum(len(m[3]) for m in sent),
+                sum(len(zlib.compress(m[3])) for m in sent),
                 len(cells),
             )
         )
+
+    def _receive(self, robot: str, copy: GridPolyMap, sent) -> GridPolyMap:
+        """The receiver's copy after the messages ``sent`` (as the coordinator applies
+        them; its atlas of the robot's keyframes follows)."""
+        from protocols.mapcodec import (
+            CORRECTION_TYPE,
+            MERGE_TYPE,
+            decode_correction,
+            decode_delta,
+            decode_merge,
+        )
+
+        atlas = self.atlases.setdefault(robot, Atlas())
+        for what, _, _, raw in sent:
+            t0 = time.perf_counter()
+            if what == MERGE_TYPE:
+                op = decode_merge(raw)
+                copy = copy.replay(op).map
+                if op.keyframe is not None:
+                    atlas.add(op.keyframe, op.polygon, op.options)
+                self.replay_ms.append((time.perf_counter() - t0) * 1e3)
+            elif what == CORRECTION_TYPE:
+                self.correction_bytes += len(raw)
+                copy, atlas, _ = replay_correction(copy, atlas, decode_correction(raw))
+                self.atlases[robot] = atlas
+                self.correction_ms.append((time.perf_counter() - t0) * 1e3)
+            else:
+                copy = copy.apply_delta(decode_delta(raw))
+        return copy
 
     def copies_identical(self) -> bool:
         """Does every receiver's copy equal its robot's final map, cell for cell?"""
@@ -275,6 +300,12 @@ def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) 
         "map_bytes_ratio_vs_png": poly_map / grid_png,
         "cells_bytes_ratio_vs_best_grid": cumulative["polymap_cells"] / cumulative[best_grid],
         "merges_sent": len(rec.replay_ms),
+        "corrections_sent": len(rec.correction_ms),
+        "correction_bytes": rec.correction_bytes,
+        "correction_bytes_share": rec.correction_bytes / max(cumulative["polymap_delta"], 1),
+        "correction_replay_ms_p95": (
+            float(np.percentile(rec.correction_ms, 95)) if rec.correction_ms else None
+        ),
         "merges_not_replayed": rec.replay_failures,
         "receiver_copies_identical": rec.copies_identical(),
         "replay_ms_median": float(np.median(rec.replay_ms)) if rec.replay_ms else None,
@@ -308,7 +339,7 @@ def record_log(path: Path, cfg: Config, seed: int = 0) -> Recording:
     for k, s in enumerate(log.scans):
         step = slam.process(s.scan, odom[k])
         if step.delta is not None:
-            rec.add("r1", float(s.stamp), s.scan, step.pose, step.delta, step.op)
+            rec.add("r1", float(s.stamp), s.scan, step.pose, step.delta, step.op, step.correction)
     rec.maps["r1"] = slam.map
     return rec
 

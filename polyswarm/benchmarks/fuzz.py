@@ -45,6 +45,7 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
     from protocols.golden.make_golden import golden_maps, golden_messages
     from protocols.mapcodec import (
         decode_any_map,
+        decode_correction,
         decode_delta,
         decode_map,
         decode_merge,
@@ -58,7 +59,11 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
         "message": (decode, [encode(m, "r1", 7, 12.5) for _, m in golden_messages()]),
         "map": (decode_map, [(golden / "map_v1.bin").read_bytes()]),
         "delta": (decode_delta, [(golden / "delta_v1.bin").read_bytes()]),
-        "merge": (decode_merge, [(golden / "merge_v1.bin").read_bytes()]),
+        "merge": (
+            decode_merge,
+            [(golden / n).read_bytes() for n in ("merge_v1.bin", "merge_keyframe_v1.bin")],
+        ),
+        "correction": (decode_correction, [(golden / "correct_v1.bin").read_bytes()]),
         "whole map as cells": (decode_any_map, [encode_cells_map(golden_maps()[1])]),
         "ros-laserscan": (ros.decode_laserscan, [ros.encode_laserscan(scan)]),
         "ros-odometry": (ros.decode_odometry, [ros.encode_odometry(1.0, (1.0, 2.0, 0.5))]),

@@ -14,12 +14,15 @@ import numpy as np
 
 from polyswarm.config import Config, RobotEntry
 from polyswarm.evaluation import coverage_tolerance, reachable_free
+from polyswarm.follow import CorrectionOp
 from polyswarm.polymap import MapDelta, MergeOp
 from polyswarm.scan import LaserScan
 
-# (robot id, simulated time s, scan, SLAM pose (x, y, theta), the robot's map delta, and
-# the same change as the merge that made it, or None)
-KeyframeHook = Callable[[str, float, LaserScan, np.ndarray, MapDelta, MergeOp | None], None]
+# (robot id, simulated time s, scan, SLAM pose (x, y, theta), the robot's map delta, the
+# same change as the merge that made it or None, and the correction before it or None)
+KeyframeHook = Callable[
+    [str, float, LaserScan, np.ndarray, MapDelta, MergeOp | None, CorrectionOp | None], None
+]
 
 
 @dataclass
@@ -47,7 +50,14 @@ def explore_in_process(
 
     from agents.coordinator import Coordinator
     from agents.robot import RobotAgent
-    from protocols.mapcodec import MERGE_TYPE, decode_delta, decode_merge, encode_update
+    from protocols.mapcodec import (
+        CORRECTION_TYPE,
+        MERGE_TYPE,
+        decode_correction,
+        decode_delta,
+        decode_merge,
+        encode_updates,
+    )
     from protocols.messages import MissionState, Odometry
     from sim import Simulation, load_world, spread_start_poses
 
@@ -80,14 +90,24 @@ def explore_in_process(
                 if out.cmd:
                     sim.set_cmd(ev.robot, *out.cmd)
                 if out.delta is not None:  # what the agent sends: the merge or the cells
-                    what, wire = encode_update(out.delta, out.op)
-                    delta_bytes += len(wire)
-                    if what == MERGE_TYPE:
-                        coord.on_robot_merge(a.id, sim.time, decode_merge(wire))
-                    else:
-                        coord.on_robot_delta(a.id, sim.time, decode_delta(wire))
+                    for what, _, _, wire in encode_updates(out.delta, out.op, out.correction):
+                        delta_bytes += len(wire)
+                        if what == MERGE_TYPE:
+                            coord.on_robot_merge(a.id, sim.time, decode_merge(wire))
+                        elif what == CORRECTION_TYPE:
+                            coord.on_robot_correction(a.id, sim.time, decode_correction(wire))
+                        else:
+                            coord.on_robot_delta(a.id, sim.time, decode_delta(wire))
                     if on_keyframe is not None:
-                        on_keyframe(a.id, sim.time, ev.scan, a.pose.copy(), out.delta, out.op)
+                        on_keyframe(
+                            a.id,
+                            sim.time,
+                            ev.scan,
+                            a.pose.copy(),
+                            out.delta,
+                            out.op,
+                            out.correction,
+                        )
                 if out.pose is not None:
                     coord.on_pose(a.id, sim.time, out.pose)
                     for b in agents:

@@ -88,6 +88,9 @@ class MergeOp:
     polygon: TypedPolygon
     options: MergeOptions
     digest: int
+    # the keyframe it came from (its pose-graph node id): a map that follows the pose
+    # graph moves the polygon later (polyswarm.follow), by this id. None: a merge only
+    keyframe: int | None = None
 
 
 def cells_digest(cells: Iterable[Cell]) -> int:

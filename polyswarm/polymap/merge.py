@@ -53,7 +53,11 @@ class Merging:
         return self.merge_many([polygon], options)
 
     def merge_many(
-        self, polygons: Sequence[TypedPolygon], options: MergeOptions | None = None
+        self,
+        polygons: Sequence[TypedPolygon],
+        options: MergeOptions | None = None,
+        clip: shapely.Geometry | None = None,
+        checked: Sequence[shapely.Geometry] | None = None,
     ) -> MergeResult:
         """Merge several polygons in one pass: their union (snapped to the map's grid)
         with the obstacle vectors of all of them, typed as ``merge`` types one polygon.
@@ -62,15 +66,24 @@ class Merging:
         pass costs about what merging one of them costs. The result may differ from
         merging them one by one where ``options`` judge each merge's growth (a thin
         growth one polygon adds is judged together with the others). An invalid polygon
-        raises ``InvalidPolygonError`` and the map is unchanged."""
+        raises ``InvalidPolygonError`` and the map is unchanged.
+
+        ``clip`` (an area made of whole cells): only the polygons' space inside it is
+        merged (a map rebuilt in part: cells at its edge have borders typed against
+        nothing beyond it, so a caller keeps only inner cells). ``checked``: the polygons
+        as shapely, validated already (``TypedPolygon.validate``)."""
         polygons = list(polygons)
         if not polygons:
             return MergeResult(self, frozenset())
-        geoms = [p.validate() for p in polygons]
+        geoms = list(checked) if checked is not None else [p.validate() for p in polygons]
         segs = [p.segments() for p in polygons]
         s = np.concatenate([st[t == VectorType.OBSTACLE] for st, _, t in segs])
         e = np.concatenate([en[t == VectorType.OBSTACLE] for _, en, t in segs])
         try:
+            if clip is not None:
+                geoms, s, e = _clipped(geoms, s, e, clip)
+                if not geoms:
+                    return MergeResult(self, frozenset())
             geom = geoms[0] if len(geoms) == 1 else shapely.union_all(geoms, grid_size=PRECISION_M)
             return self._merge_geometry(geom, s, e, options or MergeOptions())
         except shapely.errors.GEOSException as err:  # the last net: this map is unchanged
@@ -302,3 +315,24 @@ class Merging:
         if not changed:
             return MergeResult(self, frozenset())
         return MergeResult(type(self)(self.cell_size, out, version), frozenset(changed))
+
+
+def _clipped(
+    geoms: list, s: np.ndarray, e: np.ndarray, area: shapely.Geometry
+) -> tuple[list, np.ndarray, np.ndarray]:
+    """The polygons' space inside ``area`` (intersection, not GEOS' clip_by_rect, which
+    returns wrong pieces for some polygons), and the obstacle vectors near it."""
+    cut = shapely.intersection(np.array(geoms, dtype=object), area, grid_size=PRECISION_M)
+    parts = shapely.get_parts(cut)  # a cut can leave lines and points on the box's edge
+    keep = [g for g in parts if g.geom_type == "Polygon" and g.area > 0]
+    lo = np.minimum(s, e)
+    hi = np.maximum(s, e)
+    box = area.bounds
+    m = 2.0 * SLIVER_M + 0.5  # vectors just outside still type the borders inside
+    near = (
+        (hi[:, 0] >= box[0] - m)
+        & (lo[:, 0] <= box[2] + m)
+        & (hi[:, 1] >= box[1] - m)
+        & (lo[:, 1] <= box[3] + m)
+    )
+    return keep, s[near], e[near]

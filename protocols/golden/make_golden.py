@@ -24,7 +24,7 @@ from polyswarm.polymap import (
     VectorType,
     cells_digest,
 )
-from protocols.mapcodec import encode_delta, encode_map, encode_merge
+from protocols.mapcodec import encode_correction, encode_delta, encode_map, encode_merge
 
 HERE = Path(__file__).parent
 O, F = VectorType.OBSTACLE, VectorType.FRONTIER
@@ -50,6 +50,38 @@ def golden_merge() -> tuple[GridPolyMap, MergeOp]:
     res = a.merge(corridor, options)
     digest = cells_digest(res.map.cells[i] for i in res.changed)
     return a, MergeOp(2.0, a.version, res.map.version, corridor, options, digest)
+
+
+def golden_correction():
+    """The room and the corridor of ``golden_maps`` merged as keyframes 0 and 1 of a map
+    that follows its pose graph; then the corridor moved 2 cm along x, 1 cm back along y
+    and turned 5 mrad. Returns (the map and atlas before, the merge ops, the correction,
+    the map after)."""
+    from polyswarm.follow import Atlas, correct, pose_of
+
+    room, corridor = _golden_polygons()
+    options = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
+    pmap, atlas, ops = GridPolyMap(2.0), Atlas(), []
+    for kid, poly in enumerate([room, corridor]):
+        res = pmap.merge(poly, options)
+        digest = cells_digest(res.map.cells[i] for i in res.changed)
+        ops.append(MergeOp(2.0, pmap.version, res.map.version, poly, options, digest, kid))
+        pmap = res.map
+        atlas.add(kid, poly, options)
+    before, atlas_before = pmap, atlas.copy()
+    poses = {k: pose_of(atlas.poses[k]) for k in (0, 1)}
+    poses[1] = poses[1] + np.array([0.02, -0.01, 0.005])
+    after, op, _ = correct(pmap, atlas, poses)
+    return before, atlas_before, ops, op, after
+
+
+def _golden_polygons() -> tuple[TypedPolygon, TypedPolygon]:
+    room = TypedPolygon(
+        Ring([(0.5, 0.5), (3.5, 0.5), (3.5, 2.0), (0.5, 2.0)], [O, F, O, O]),
+        (Ring([(1.0, 1.0), (1.0, 1.2), (1.3, 1.2), (1.3, 1.0)], [O] * 4),),
+    )
+    corridor = TypedPolygon(Ring([(3.4, 1.0), (6.0, 1.0), (6.0, 1.6), (3.4, 1.6)], [O, F, O, F]))
+    return room, corridor
 
 
 def units(xy: np.ndarray) -> list[list[int]]:
@@ -138,6 +170,22 @@ def main() -> None:
         digest=op.digest,
         options_units=[round(v * UNITS_PER_M) for v in astuple(op.options)],
         polygon=describe_polygons([op.polygon])[0],
+    )
+    _, _, ops, fix, after = golden_correction()
+    _write("merge_keyframe_v1", encode_merge(ops[1]), "polymap-merge", keyframe=ops[1].keyframe)
+    changed = [c for c in after.cells.values() if c.version == fix.version]
+    _write(
+        "correct_v1",
+        encode_correction(fix),
+        "polymap-correct",
+        base_version=fix.base_version,
+        version=fix.version,
+        digest=fix.digest,
+        moves=[[k, list(d)] for k, d in fix.moves],
+        cells=[
+            {"index": list(c.index), "polygons": describe_polygons(c.polygons)}
+            for c in sorted(changed, key=lambda c: c.index)
+        ],
     )
 
 
