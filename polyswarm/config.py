@@ -277,11 +277,11 @@ class SlamConfig:
     # replaced by chords (polyswarm.trim): 8-17 % fewer bytes sent on the shared logs
     trim_merges: bool = True
     # after a loop closure, the cells of keyframes it moved are merged again at their
-    # new poses (polyswarm.follow) and sent as a cell delta: the shared map loses the
-    # ghosts of the pose errors made before the loop closed (ACES: 58 % ghost walls ->
-    # 0.2 %). Off by default: each correction costs 1-2 s and, sent as cells, 4.6 times
-    # the map bytes on csail; corrections sent as poses are to come (issue 32)
-    map_follows_graph: bool = False
+    # new poses (polyswarm.follow), and the correction goes to the coordinator as poses
+    # (PROTOCOL.md 3.5): the shared map loses the ghosts of the pose errors made before
+    # the loop closed (ACES, real odometry: 58 % ghost walls -> 0.2 %). The cost: a
+    # correction takes 0.3-2 s on the logs' 360-beam, 80 m scans (polyswarm bench slam)
+    map_follows_graph: bool = True
     obstacle_max_gap_m: float = positive(0.5, 100.0)  # points farther apart: a frontier...
     obstacle_gap_beams: float = num(4.0, 0.0, 1000.0)  # ...unless this many beam spacings
     # rebuild_map (offline runs, after loop closures) merges this many consecutive

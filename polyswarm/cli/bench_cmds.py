@@ -227,6 +227,16 @@ def _live_row(name: str, m: dict) -> tuple[str, str]:
     )
 
 
+def _correction_row(name: str, m: dict) -> tuple[str, str]:
+    """Loop corrections of the map: how many, and their p95 beside the keyframes'."""
+    if not m.get("corrections"):
+        return (f"{name}: map corrections", "none")
+    return (
+        f"{name}: map corrections, p95 (keyframe p95)",
+        f"{m['corrections']}, {m['correction_p95_ms']:.0f} ms ({m['keyframe_p95_ms']:.0f} ms)",
+    )
+
+
 @bench_app.command("slam")
 def bench_slam(
     as_json: bool = JSON_OPT,
@@ -258,11 +268,13 @@ def bench_slam(
         rows.append((f"{w}: max error / distance (thesis)", f"{ours:.3f} % ({thesis:.3f} %)"))
         rows.append((f"{w}: map IoU, polygons", f"{m['map_iou']:.3f}, {m['polygons']}"))
         rows.append(_live_row(w, m))
+        rows.append(_correction_row(w, m))
     for name, m in res["logs"].items():
         real = m.get("real_odometry")
-        rows.append(_live_row(f"log {name}", real or m))
-        if real is not None:
-            rows.append(_live_row(f"log {name}, map following the graph", real["following"]))
+        src = "real odometry" if real is not None else "synthetic noise"
+        rows.append(_live_row(f"log {name} ({src})", real or m))
+        rows.append(_live_row(f"log {name} ({src}), a map that only grows", (real or m)["growing"]))
+        rows.append(_correction_row(f"log {name} ({src})", real or m))
         rows.append(
             (
                 f"log {name}: ATE (odometry), synthetic noise",
