@@ -174,6 +174,8 @@ class Coordinator:
         self.stage_ms: dict[str, float] = {}
         self.applied_deltas = 0  # robot cell deltas applied to them
         self.map_fetches = 0  # robot maps fetched whole (a gap, or a merge that differed)
+        self.fetch_bytes = 0  # ... and the bytes they took
+        self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -519,6 +521,9 @@ class Coordinator:
             cpu_ms,
             _points_cm([t.goal for t in self.targets.values()]),
             _points_cm(self.blacklist[::2]),  # goals (each is followed by its midpoint)
+            self.gaps,
+            self.map_fetches,
+            self.fetch_bytes,
         )
         return out
 
@@ -810,6 +815,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                                     coord.on_robot_delta(rid, item.stamp_s, delta)
                             except MapError as e:
                                 log.info("resync of %s: %s", rid, e)
+                                coord.gaps += 1
                                 resync.add(rid)
                             else:
                                 if wire is not None:
@@ -820,7 +826,9 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
                         log.warning("%s: %s", item.key, e)
-                resync.update(coord.needs_resync())
+                behind = set(coord.needs_resync()) - resync
+                coord.gaps += len(behind)  # a last delta lost: announced, never received
+                resync |= behind
                 for rid in list(resync):
                     log.info("fetching the full map of %s", rid)
                     coord.map_fetches += 1
@@ -829,6 +837,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                     coord.robot(rid).behind_since = coord.now  # next try after a pause
                     if got is None:
                         continue
+                    coord.fetch_bytes += len(got[0])
                     try:
                         before = coord.robot(rid).map
                         with coord.timed("fetch"):

@@ -376,6 +376,12 @@ class CoordinatorStatus(Message):
     cycle_cpu_ms: float = 0.0  # the same cycle's processor time (not time spent preempted)
     targets: tuple[tuple[float, float], ...] = ()  # frontier targets' goal points (views)
     blacklisted: tuple[tuple[float, float], ...] = ()  # goals given up on (views)
+    # robot map updates that did not apply since the start (a version gap: a delta lost
+    # or late; a merge or correction that replayed differently), the robot maps fetched
+    # whole to heal them, and those fetches' bytes
+    gaps: int = 0
+    fetches: int = 0
+    fetch_bytes: int = 0
 
     def body(self) -> dict:
         out = {
@@ -392,6 +398,8 @@ class CoordinatorStatus(Message):
             out["goals"] = [list(p) for p in self.targets]
         if self.blacklisted:
             out["banned"] = [list(p) for p in self.blacklisted]
+        if self.gaps or self.fetches:  # absent when none (and in older senders' messages)
+            out["losses"] = [self.gaps, self.fetches, self.fetch_bytes]
         return out
 
     @classmethod
@@ -402,6 +410,9 @@ class CoordinatorStatus(Message):
         for r in robots:
             if not isinstance(r, str) or not NAME_RE.match(r):
                 raise ProtocolError(f"field 'robots': bad robot name {r!r}")
+        losses = b.get("losses", [0, 0, 0])
+        if not isinstance(losses, list) or len(losses) != 3:
+            raise ProtocolError("field 'losses': expected [gaps, fetches, fetch bytes]")
         return cls(
             _str(b.get("state"), "state", MissionState),
             tuple(robots),
@@ -413,6 +424,7 @@ class CoordinatorStatus(Message):
             _num(b.get("cpu_ms", 0.0), "cpu_ms", 0.0),
             _points(b.get("goals", ()), "goals", MAX_STATUS_POINTS),
             _points(b.get("banned", ()), "banned", MAX_STATUS_POINTS),
+            *(_int(v, f"losses[{k}]", 0) for k, v in enumerate(losses)),
         )
 
 

@@ -275,6 +275,54 @@ class Simulation:
                 return o.index
         return None
 
+    def state(self) -> dict:
+        """What a restarted simulator needs to go on where this one is (JSON-able): the
+        time, each robot's true pose, odometry, speeds and counts, the noise generators."""
+        return {
+            "steps": self.steps,
+            "robots": [
+                {
+                    "pose": r.pose.tolist(),
+                    "odom": r.odom.tolist(),
+                    "v": r.v,
+                    "w": r.w,
+                    "distance_m": r.distance_m,
+                    "wall_collisions": r.wall_collisions,
+                    "robot_collisions": r.robot_collisions,
+                    "blocked": r.blocked,
+                }
+                for r in self.robots
+            ],
+            "lidar_rng": [g.bit_generator.state for g in self._lidar_rng],
+            "odom_rng": [g.bit_generator.state for g in self._odom_rng],
+        }
+
+    def restore(self, state: dict, steps_ahead: int = 0) -> None:
+        """Go on from ``state`` (``state()`` of a simulator of the same world, config and
+        robots), ``steps_ahead`` physics steps later (rounded up to a whole scan), so
+        that nothing is stamped earlier than what the old simulator already sent.
+        Robots keep their poses and odometry. Raises SimulationError on a mismatch."""
+        robots = state.get("robots", [])
+        if len(robots) != len(self.robots):
+            raise SimulationError(f"state of {len(robots)} robots, simulating {len(self.robots)}")
+        for r, saved in zip(self.robots, robots, strict=True):
+            r.pose = np.array(saved["pose"], dtype=float)
+            r.odom = np.array(saved["odom"], dtype=float)
+            r.v, r.w = float(saved["v"]), float(saved["w"])
+            r.distance_m = float(saved["distance_m"])
+            r.wall_collisions = int(saved["wall_collisions"])
+            r.robot_collisions = int(saved["robot_collisions"])
+            r.blocked = bool(saved["blocked"])
+            self._show(r)
+        for g, st in zip(
+            self._lidar_rng + self._odom_rng, state["lidar_rng"] + state["odom_rng"], strict=True
+        ):
+            g.bit_generator.state = st
+        steps = int(state["steps"]) + max(0, steps_ahead)
+        self.steps = -(-steps // self.scan_every) * self.scan_every  # a sweep starts anew
+        self._ranges[:] = np.inf
+        self._prev = [r.pose.copy() for r in self.robots]
+
     # -- stepping -----------------------------------------------------------------------
 
     def step(self) -> list[ScanEvent]:

@@ -76,7 +76,7 @@ def _kill_from_outside(out, name: str, after_s: float, seen: dict) -> None:
     seen["pid"] = pid
 
 
-@pytest.mark.parametrize("victim", ["r2", "coordinator"])
+@pytest.mark.parametrize("victim", ["r2", "coordinator", "sim"])
 def test_a_process_killed_from_outside_is_restarted_and_the_mission_goes_on(tmp_path, victim):
     import threading
 
@@ -92,7 +92,11 @@ def test_a_process_killed_from_outside_is_restarted_and_the_mission_goes_on(tmp_
     assert m["restarts"] == {victim: 1}
     pids = json.loads((out / "logs" / "pids.json").read_text())
     assert pids[victim] != seen["pid"]  # a new process
-    resumed = {"r2": "r2: resumed from", "coordinator": "restored the merged map"}[victim]
+    resumed = {
+        "r2": "r2: resumed from",
+        "coordinator": "restored the merged map",
+        "sim": "simulator resumed from",
+    }[victim]
     assert resumed in log_text(out, victim)  # from what it had persisted
     assert_nothing_lost(out)
 
@@ -137,6 +141,9 @@ def test_message_loss_duplication_and_reordering_heal_by_resync(tmp_path, faults
     m, out = launch(tmp_path, "--link-faults", faults)
     assert completed(m) and m["crashed_processes"] == []
     assert "fetching the full map" in log_text(out, "coordinator")  # gaps were seen and healed
+    # ... and counted as they happened, with the fetches that healed them
+    assert m["robot_map_gaps"] > 0 and m["robot_map_fetches"] >= 1
+    assert m["robot_map_fetch_bytes"] > 0
     assert_nothing_lost(out)
 
 

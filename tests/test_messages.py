@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import msgpack
@@ -53,6 +54,19 @@ def test_coordinator_status_without_the_optional_cpu_ms_decodes_with_zero():
     assert raw.pop("cpu_ms") == status.cycle_cpu_ms > 0
     _, back = decode(msgpack.packb(raw), CoordinatorStatus)
     assert back.cycle_cpu_ms == 0.0 and back.cycle_ms == status.cycle_ms
+
+
+def test_coordinator_status_carries_its_loss_counts_and_refuses_bad_ones():
+    status = dataclasses.replace(
+        dict(golden_messages())["coordinator-status"], gaps=3, fetches=2, fetch_bytes=4096
+    )
+    _, back = decode(encode(status, "coordinator", 3, 1.0), CoordinatorStatus)
+    assert (back.gaps, back.fetches, back.fetch_bytes) == (3, 2, 4096)
+    for bad in ([1, 2], [1, -2, 3], "3"):
+        raw = msgpack.unpackb(encode(status, "coordinator", 3, 1.0))
+        raw["losses"] = bad
+        with pytest.raises(DecodeError):
+            decode(msgpack.packb(raw), CoordinatorStatus)
 
 
 def test_scan_round_trip_keeps_inf_and_nan_beams():

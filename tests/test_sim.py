@@ -114,6 +114,37 @@ def test_each_robot_has_its_own_systematic_odometry_error():
     assert all(0.8 < q < 1.2 and q != pytest.approx(1.0, abs=1e-4) for q in ratios)
 
 
+def test_a_simulator_restored_from_a_saved_state_goes_on_where_the_old_one_was():
+    """A killed simulator started again on its state: the same poses, odometry, noise
+    and scans as the one that went on (json round trip, as simserve saves it)."""
+    import json
+
+    poses = [(1.0, 1.0, 0.0), (1.0, 3.0, 0.0)]
+    with Simulation(square_room(), cfg(), 2, start_poses=poses) as a:
+        for k in (0, 1):
+            a.set_cmd(k, 0.2, 0.3)
+        list(a.run(2.0))
+        saved = json.loads(json.dumps(a.state()))
+        went_on = list(a.run(1.0))
+        with Simulation(square_room(), cfg(), 2, start_poses=poses) as b:
+            b.restore(saved)
+            for k in (0, 1):
+                b.set_cmd(k, 0.2, 0.3)
+            resumed = list(b.run(1.0))
+            assert b.time == pytest.approx(a.time)
+            for x, y in zip(went_on, resumed, strict=True):
+                assert np.array_equal(x.scan.ranges, y.scan.ranges)
+                assert np.array_equal(x.odom, y.odom) and np.array_equal(x.true_pose, y.true_pose)
+        with Simulation(square_room(), cfg(), 2, start_poses=poses) as c:
+            c.restore(saved, steps_ahead=1)  # later than what was sent: a whole scan later
+            assert c.time > 2.0 and c.steps % c.scan_every == 0
+        with (
+            Simulation(square_room(), cfg(), 1, start_poses=poses[:1]) as d,
+            pytest.raises(SimulationError),
+        ):
+            d.restore(saved)
+
+
 def test_two_robots_see_each_other():
     poses = [(1.0, 2.0, 0.0), (3.0, 2.0, math.pi)]
     with Simulation(square_room(), cfg(lidar={"noise_sigma_m": 0.0}), 2, start_poses=poses) as sim:

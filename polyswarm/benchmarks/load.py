@@ -10,6 +10,10 @@ runs for a wall-clock duration (the soak). Measured:
 * ``messages_lost``: robot map versions the coordinator never received, from the state
   both sides persist at shutdown (each missing version is a delta neither delivered
   nor recovered by a resync);
+* ``robot_map_gaps``, ``robot_map_fetches``, ``robot_map_fetch_bytes``: losses in
+  transit as they happened (robot map updates that did not apply: lost, late, or
+  replayed otherwise), and the whole-map fetches that healed them, with their bytes;
+  ``messages_lost`` looks only at the end, after the fetches;
 * ``memory_growth_fraction``: the coordinator's resident memory at the end against
   its value after the first tenth of the run (the map grows, so some growth is data);
   ``memory_growth_fraction_second_half`` the same from the middle of the run, when a
@@ -74,6 +78,9 @@ def run(
         "wall_time_s": m["wall_time_s"],
         "sim_time_s": m["sim_time_s"],
         "messages_lost": lost,
+        "robot_map_gaps": m["robot_map_gaps"],
+        "robot_map_fetches": m["robot_map_fetches"],
+        "robot_map_fetch_bytes": m["robot_map_fetch_bytes"],
         "coordinator_cycle_p95_ms": m["coordinator_cycle_p95_ms"],
         "coordinator_cycle_cpu_p95_ms": m["coordinator_cycle_cpu_p95_ms"],
         "robots_nice": robots_nice,

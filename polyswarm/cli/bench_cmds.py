@@ -671,7 +671,12 @@ def bench_load(
         f"Load: {res['robots']} robots on {res['world']}",
         [
             ("wall / simulated time", f"{res['wall_time_s']:.0f} s / {res['sim_time_s']:.0f} s"),
-            ("messages lost (map versions)", str(res["messages_lost"])),
+            ("messages lost at the end (map versions)", str(res["messages_lost"])),
+            (
+                "... in transit: gaps, map fetches (bytes)",
+                f"{res['robot_map_gaps']}, {res['robot_map_fetches']} "
+                f"({res['robot_map_fetch_bytes']:,} B)",
+            ),
             ("coordinator cycle p95", f"{res['coordinator_cycle_p95_ms']:.0f} ms"),
             ("... its processor time p95", f"{res['coordinator_cycle_cpu_p95_ms']:.0f} ms"),
             ("coordinator memory growth", "-" if g is None else f"{100 * g:.1f} %"),

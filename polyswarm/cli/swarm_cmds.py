@@ -353,6 +353,10 @@ def launch_cmd(
         ("path length (all robots)", f"{m['total_path_length_m']:.0f} m"),
         ("collisions walls / robots", f"{m['collisions']['walls']} / {m['collisions']['robots']}"),
         ("bytes sent per robot", ", ".join(f"{b:,}" for b in m["bytes_sent_per_robot"].values())),
+        (
+            "robot map updates lost in transit, map fetches (bytes)",
+            f"{m['robot_map_gaps']}, {m['robot_map_fetches']} ({m['robot_map_fetch_bytes']:,} B)",
+        ),
         ("wall time", f"{m['wall_time_s']:.0f} s"),
         ("crashed processes", ", ".join(m["crashed_processes"]) or "none"),
         ("restarted processes", ", ".join(f"{k} x{n}" for k, n in m["restarts"].items()) or "none"),

@@ -72,9 +72,9 @@ START_TIMEOUT_S = 60.0  # wall seconds for all processes to come up
 RESTART_BASE_S = 1.0
 RESTART_MAX_S = 8.0
 MAX_RESTARTS = 5
-# the simulator stands for the physical world (robots' poses, odometry, the clock): it
-# is not restarted, and its exit ends the mission
-NOT_RESTARTED = ("sim",)
+# every child is restarted: the simulator too, from the state it saves after every lidar
+# tick (polyswarm.runners.simserve): its robots are where they were, its clock goes on
+NOT_RESTARTED: tuple[str, ...] = ()
 PHANTOM_M = 0.3  # an obstacle vector this far from every true wall is no wall
 
 
@@ -185,6 +185,10 @@ class Observer:
         self.sim_speed = 0.0
         self.mission = MissionState.STARTING
         self.coordinator: CoordinatorStatus | None = None
+        # robot map updates lost in transit as the coordinator saw them: gaps, map
+        # fetches, their bytes; summed over coordinator restarts (each counts from 0)
+        self.losses = np.zeros(3, dtype=np.int64)
+        self._losses_now = np.zeros(3, dtype=np.int64)
         self.cycle_ms: list[float] = []
         self.cycle_cpu_ms: list[float] = []
         self.coverage: list[tuple[float, float]] = []
@@ -245,6 +249,10 @@ class Observer:
         elif isinstance(msg, CoordinatorStatus):
             self.coordinator = msg
             self.mission = msg.state
+            now = np.array([msg.gaps, msg.fetches, msg.fetch_bytes], dtype=np.int64)
+            if (now < self._losses_now).any():  # a restarted coordinator counts from 0
+                self.losses += self._losses_now
+            self._losses_now = now
             self.cycle_ms.append(msg.cycle_ms)
             self.cycle_cpu_ms.append(msg.cycle_cpu_ms)
             if msg.map_version > self.merged.version:  # a late or lost delta
@@ -302,6 +310,11 @@ class Observer:
                 float(np.percentile(self.cycle_cpu_ms, 95)) if self.cycle_cpu_ms else None
             ),
             "merged_map_bytes": None,
+            # robot map updates the coordinator saw lost or late in transit, and the
+            # whole-map fetches (and bytes) that healed them
+            "robot_map_gaps": int(self.losses[0] + self._losses_now[0]),
+            "robot_map_fetches": int(self.losses[1] + self._losses_now[1]),
+            "robot_map_fetch_bytes": int(self.losses[2] + self._losses_now[2]),
             "wall_time_s": wall_s,
             "coordinator_rss_mb_over_time": [
                 [round(t, 1), round(m, 1)] for t, m in self.coordinator_rss_mb

@@ -10,25 +10,36 @@ more than ``max_lag_s`` of simulated time ahead of a live agent's last acknowled
 scan: on a busy machine the simulation slows down instead of robots driving blind.
 Before the first step it waits until every robot's agent (and the coordinator, when
 asked) holds a liveliness token.
+
+With ``persist.dir`` set, the simulator's state (time, robots' true poses, odometry and
+noise generators) is written there after every lidar tick (``sim.json``), and a
+simulator started on it goes on from there, one scan later: a killed simulator that is
+started again (``polyswarm launch`` does) continues the same mission; its robots are
+where they were.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import math
+import os
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
 from agents.session import Bus, SessionSpec, is_alive_change, open_session
 from polyswarm.config import Config
+from polyswarm.errors import SimulationError
 from protocols.keys import SwarmKeys
 from protocols.messages import Clock, CmdVel, Odometry, Scan, Truth
 from sim import Simulation, World
 
 log = logging.getLogger(__name__)
 
+STATE_FILE = "sim.json"  # in persist.dir
 CMD_TIMEOUT_S = 0.5  # simulated seconds without a command: the robot stops
 ACK_TIMEOUT_S = 1.0  # wall seconds: a scan never acknowledged this long was lost
 STALL_WARN_S = 5.0  # wall seconds waiting for an agent before a warning
@@ -51,23 +62,50 @@ def serve(
     ids = [r.id for r in cfg.robots]
     starts = [tuple(r.start) for r in cfg.robots] if cfg.robots else None
     n = max(1, len(ids))
+    saved = Path(cfg.persist.dir) / STATE_FILE if cfg.persist.dir else None
     with Simulation(world, cfg.sim, n, start_poses=starts, gui=gui) as sim:
         if not ids:
             ids = [r.name for r in sim.robots]
         index = {rid: k for k, rid in enumerate(ids)}
+        if saved is not None and saved.exists():
+            resume(sim, saved)
         with open_session(session_spec) as session:
             bus = Bus(session, "sim")
             try:
                 bus.subscribe(keys.all_robots("cmd_vel"), CmdVel)
                 bus.watch_alive(keys.all_alive())
                 bus.declare_alive(keys.alive("sim", "sim"))
-                _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s)
+                _loop(
+                    sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s, saved
+                )
             finally:
                 bus.close()
         return sim
 
 
-def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s) -> None:
+def resume(sim: Simulation, path: Path) -> bool:
+    """Go on from a saved state (one scan after it); a state that cannot be read is
+    logged and the simulation starts afresh."""
+    try:
+        sim.restore(json.loads(path.read_text()), steps_ahead=sim.scan_every)
+    except (OSError, ValueError, KeyError, TypeError, SimulationError) as e:
+        log.error("simulator state %s not used (starting afresh): %s", path, e)
+        return False
+    log.info("simulator resumed from %s at %.2f s", path, sim.time)
+    return True
+
+
+def save_state(sim: Simulation, path: Path) -> None:
+    """``sim.state()`` to ``path``, atomically (a kill never leaves half a file)."""
+    tmp = path.with_name(path.name + ".tmp")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp.write_text(json.dumps(sim.state()))
+    os.replace(tmp, path)
+
+
+def _loop(
+    sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s, saved=None
+) -> None:
     alive: set[tuple[str, str]] = set()
     acked = dict.fromkeys(ids, -1)  # last scan seq each agent has acknowledged
     sent: dict[str, list[tuple[int, float]]] = {rid: [] for rid in ids}  # (seq, t) unacked
@@ -175,3 +213,5 @@ def _loop(sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration
         achieved = (t - last_clock[1]) / max(now - last_clock[0], 1e-9)
         last_clock = (now, t) if now - last_clock[0] > 1.0 else last_clock
         bus.publish(keys.clock, Clock(t, float(np.clip(achieved, 0, 1e6))), t)
+        if saved is not None:  # after publishing: a resumed simulator starts one scan later
+            save_state(sim, saved)
