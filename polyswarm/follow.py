@@ -8,12 +8,13 @@ walls it mapped again; on the ACES log, 58 % of the live map's wall length lies 
 than 10 cm from any wall of the map rebuilt at the optimised poses).
 
 The keyframes of a map are kept as they were merged (the polygon a ``MergeOp`` carried,
-on the wire's grid, and the pose it was merged at): an ``Atlas``. A *correction* is a
-list of (keyframe id, new pose); applying it (``apply_moves``) rebuilds the cells ``C``
-that the moved keyframes' old and new placements touch, from every keyframe of the
-atlas whose placement reaches ``C`` or its neighbours (borders are typed against
-complete neighbours). Cells outside ``C`` stay bit for bit. Explored space is moved,
-never deleted: a cell that is empty after the rebuild is sent as an empty cell.
+on the wire's grid, and a frame it is held at), moved by every correction since: an
+``Atlas``. A *correction* is a list of (keyframe id, move of its frame); applying it
+(``apply_moves``) rebuilds the cells ``C`` that the moved keyframes' old and new
+placements touch, from every keyframe of the atlas whose placement reaches ``C`` or its
+neighbours (borders are typed against complete neighbours). Cells outside ``C`` stay
+bit for bit. Explored space is moved, never deleted: a cell that is empty after the
+rebuild is sent as an empty cell.
 
 Applying a correction is a pure function of the map, the atlas and the poses, so a
 receiver holding the same atlas (it replayed the same merges) gets the same cells: a
@@ -119,65 +120,49 @@ def _moved_polygon(poly: TypedPolygon, q0: QPose, q1: QPose) -> TypedPolygon | N
     return snap_polygon(moved, 1)
 
 
-@dataclass(frozen=True)
-class Placed:
-    """A keyframe polygon where its atlas places it: as a polygon, as shapely, and its
-    bounding box (x0, y0, x1, y1)."""
-
-    polygon: TypedPolygon | None
-    geom: shapely.Geometry | None
-    box: tuple[float, ...]
-
-
 class Atlas:
-    """The keyframes a map was merged from, as merged (the polygon, on the wire's grid,
-    and the pose it was placed at), and where each is placed now. Both ends of a link
-    keep one per robot map: the robot as it merges, the receiver as it replays."""
+    """The keyframes a map was merged from, each as the polygon it merged (on the
+    wire's grid), moved by the corrections since, and its frame (where the polygon is
+    held: ``frame_of`` it when merged, moved with it). Both ends of a link keep one per
+    robot map: the robot as it merges, the receiver as it replays."""
 
     def __init__(self) -> None:
-        self.merged: dict[int, tuple[TypedPolygon, QPose]] = {}  # id -> polygon, its pose
-        self.poses: dict[int, QPose] = {}  # id -> where it is placed now
-        self._placed: dict[int, Placed] = {}
+        self.polygons: dict[int, TypedPolygon] = {}  # id -> its polygon where it is now
+        self.poses: dict[int, QPose] = {}  # id -> its frame
+        self.boxes: dict[int, tuple[float, float, float, float]] = {}  # id -> bounding box
         self.options: MergeOptions | None = None  # the merges' options (one per robot)
 
     def __len__(self) -> int:
-        return len(self.merged)
+        return len(self.polygons)
 
     def __contains__(self, kid: int) -> bool:
-        return kid in self.merged
+        return kid in self.polygons
 
     def add(self, kid: int, polygon: TypedPolygon, options: MergeOptions) -> None:
         """Keyframe ``kid``'s merged polygon (a replayed merge), held at ``frame_of`` it."""
-        pose = frame_of(polygon)
-        self.merged[kid] = (polygon, pose)
-        self.poses[kid] = pose
-        self._placed.pop(kid, None)
+        self._place(kid, polygon, frame_of(polygon))
         self.options = options
 
-    def placed(self, kid: int) -> Placed:
-        """The keyframe's polygon at its current pose (None if it collapsed there)."""
-        if kid not in self._placed:
-            poly, q0 = self.merged[kid]
-            moved = _moved_polygon(poly, q0, self.poses[kid])
-            if moved is None:
-                self._placed[kid] = Placed(None, None, (math.inf, math.inf, -math.inf, -math.inf))
-            else:
-                lo, hi = moved.shell.xy.min(axis=0), moved.shell.xy.max(axis=0)
-                geom = moved.to_shapely()  # valid: snap_polygon checked it
-                shapely.prepare(geom)
-                self._placed[kid] = Placed(moved, geom, (lo[0], lo[1], hi[0], hi[1]))
-        return self._placed[kid]
-
     def move(self, kid: int, pose: QPose) -> None:
-        if self.poses[kid] != pose:
-            self.poses[kid] = pose
-            self._placed.pop(kid, None)
+        """Keyframe ``kid``'s frame to ``pose``, its polygon with it (from where it is:
+        each move snaps to the 10 um grid again). A polygon that would collapse there (a
+        sliver) stays where it is, on every end alike."""
+        if self.poses[kid] == pose:
+            return
+        moved = _moved_polygon(self.polygons[kid], self.poses[kid], pose)
+        if moved is None:
+            log.info("keyframe %d not moved: its polygon collapses at %s", kid, pose)
+            return
+        self._place(kid, moved, pose)
+
+    def _place(self, kid: int, polygon: TypedPolygon, pose: QPose) -> None:
+        lo, hi = polygon.shell.xy.min(axis=0), polygon.shell.xy.max(axis=0)
+        self.polygons[kid], self.poses[kid] = polygon, pose
+        self.boxes[kid] = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
 
     def copy(self) -> Atlas:
         out = Atlas()
-        out.merged = dict(self.merged)
-        out.poses = dict(self.poses)
-        out._placed = dict(self._placed)
+        out.polygons, out.poses, out.boxes = dict(self.polygons), dict(self.poses), dict(self.boxes)
         out.options = self.options
         return out
 
@@ -208,17 +193,16 @@ def _plus(a: QPose, b: QPose) -> QPose:
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-def _cells_of(pmap: GridPolyMap, placed: Placed) -> set[CellIndex]:
-    """The cells the placed polygon reaches."""
-    box = placed.box
-    if placed.geom is None:
-        return set()
+def _cells_of(pmap: GridPolyMap, atlas: Atlas, kid: int) -> set[CellIndex]:
+    """The cells keyframe ``kid``'s polygon reaches where it is now."""
+    box = atlas.boxes[kid]
     i0, j0 = pmap.cell_index(box[0], box[1])
     i1, j1 = pmap.cell_index(box[2], box[3])
     ij = [(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)]
     cs = pmap.cell_size
     a = np.array(ij, dtype=float) * cs
-    hit = shapely.intersects(placed.geom, shapely.box(a[:, 0], a[:, 1], a[:, 0] + cs, a[:, 1] + cs))
+    geom = atlas.polygons[kid].to_shapely()
+    hit = shapely.intersects(geom, shapely.box(a[:, 0], a[:, 1], a[:, 0] + cs, a[:, 1] + cs))
     return {ix for ix, h in zip(ij, hit, strict=True) if h}
 
 
@@ -237,9 +221,9 @@ def apply_moves(
         raise PolyswarmError("correction of a map with no merged keyframes")
     rebuild: set[CellIndex] = set()
     for kid in sorted(moves):
-        rebuild |= _cells_of(pmap, atlas.placed(kid))
+        rebuild |= _cells_of(pmap, atlas, kid)
         atlas.move(kid, moves[kid])
-        rebuild |= _cells_of(pmap, atlas.placed(kid))
+        rebuild |= _cells_of(pmap, atlas, kid)
     version = pmap.version + 1
     cs = pmap.cell_size
     cells = dict(pmap.cells)
@@ -276,15 +260,15 @@ def _rebuild_window(
     )
     shapely.prepare(area)
     box = area.bounds
-    kids = []
-    for kid in sorted(atlas.merged):
-        b = atlas.placed(kid).box
-        if b[0] < box[2] and b[2] > box[0] and b[1] < box[3] and b[3] > box[1]:
-            kids.append(kid)
-    near = [atlas.placed(k) for k in kids]
-    hits = shapely.intersects(area, [p.geom for p in near]) if near else []
-    placed = [p for p, hit in zip(near, hits, strict=True) if hit]
-    polys, geoms = [p.polygon for p in placed], [p.geom for p in placed]
+    near = [
+        k
+        for k, b in sorted(atlas.boxes.items())
+        if b[0] < box[2] and b[2] > box[0] and b[1] < box[3] and b[3] > box[1]
+    ]
+    geoms = [atlas.polygons[k].to_shapely() for k in near]  # valid: snapped and checked
+    hits = shapely.intersects(area, geoms) if near else []
+    polys = [atlas.polygons[k] for k, hit in zip(near, hits, strict=True) if hit]
+    geoms = [g for g, hit in zip(geoms, hits, strict=True) if hit]
     fresh = GridPolyMap(cs)
     try:  # all at once: one union of overlapping keyframes costs about one merge
         return fresh.merge_many(polys, atlas.options, area, geoms).map, len(polys)
