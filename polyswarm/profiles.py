@@ -198,7 +198,20 @@ HOKUYO = Profile(
     },
 )
 
-PROFILES: dict[str, Profile] = {p.name: p for p in (THESIS, TURTLEBOT3, TURTLEBOT4, HOKUYO)}
+# the thesis's sensor and base on the TurtleBot3's wheels: how much of a profile's result
+# comes from its odometry alone (maps that follow the pose graph are measured on it)
+THESIS_NOISY_ODOMETRY = Profile(
+    "thesis-noisy-odometry",
+    "the thesis's sensor and base with the TurtleBot3's odometry noise",
+    lidar=dict(THESIS.lidar),
+    base=dict(THESIS.base),
+    odometry_noise=dict(TURTLEBOT3.odometry_noise),
+    slam=dict(THESIS.slam),
+)
+
+PROFILES: dict[str, Profile] = {
+    p.name: p for p in (THESIS, TURTLEBOT3, TURTLEBOT4, HOKUYO, THESIS_NOISY_ODOMETRY)
+}
 DEFAULT_PROFILE = THESIS.name
 
 

@@ -11,7 +11,6 @@ import subprocess
 import sys
 
 import pytest
-import shapely
 
 
 def launch(tmp_path, *extra: str) -> tuple[dict, object]:
@@ -36,18 +35,13 @@ def assert_nothing_lost(out) -> None:
     """The coordinator's merged map holds everything it received from each robot, and
     each robot still holds everything it sent (deltas in flight at shutdown are in the
     robot's own persisted map)."""
-    from agents import persist
+    from polyswarm.benchmarks.faults import lost_space
 
-    state = out / "state"
-    merged, robots = persist.load_coordinator(state)  # snapshots plus journals
-    merged = merged.explored_region()
-    for r in ("r1", "r2"):
-        received = robots[r].explored_region()
-        own = persist.load_agent(state, r)[0].explored_region()
-        missing = shapely.difference(received, merged).area
-        assert missing <= 1e-3 * received.area, f"{missing:.3f} m2 of {r} not in the merge"
-        dropped = shapely.difference(received, own).area
-        assert dropped <= 1e-3 * received.area, f"{r} lost {dropped:.3f} m2 it had sent"
+    lost = lost_space(out)
+    assert set(lost) == {"r1", "r2"}
+    for r, v in lost.items():
+        assert v["missing_m2"] <= 1e-3 * v["shared_m2"], f"{v} of {r} not in the merge"
+        assert v["dropped_m2"] <= 1e-3 * v["shared_m2"], f"{r} lost what it had sent: {v}"
 
 
 def test_agent_killed_and_restarted_resumes_its_map(tmp_path):

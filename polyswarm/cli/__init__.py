@@ -86,8 +86,9 @@ def setup_logging(level: int) -> None:
 
 
 PROFILE_HELP = (
-    "Robot profile: thesis, turtlebot3, turtlebot4 or hokuyo (its lidar, base and odometry "
-    "noise; values the config file sets win). Default: the config's, else thesis."
+    "Robot profile: thesis, turtlebot3, turtlebot4, hokuyo or thesis-noisy-odometry (its "
+    "lidar, base and odometry noise; values the config file sets win). Default: the "
+    "config's, else thesis."
 )
 
 

@@ -410,7 +410,9 @@ def bench_explore(
         0, min=0, help="First seed (runs seeds FIRST_SEED .. FIRST_SEED + SEEDS - 1)."
     ),
     profile: str = typer.Option(
-        "thesis", help="Robot profiles, comma separated (thesis, turtlebot3, turtlebot4, hokuyo)."
+        "thesis",
+        help="Robot profiles, comma separated (thesis, turtlebot3, turtlebot4, hokuyo, "
+        "thesis-noisy-odometry).",
     ),
     nearest: bool = typer.Option(
         True, help="Also run the nearest-frontier baseline (3 robots, maze and loop)."
@@ -635,6 +637,48 @@ def bench_cells(
             f"{m['map_bytes']:,}",
         )
     Console().print(t)
+
+
+def _fault_row(r: dict) -> tuple[str, str]:
+    what = f"{r['world']} seed {r['seed']}: {r['victim']} killed at {r['kill_after_wall_s']:.0f} s"
+    if not r["killed"]:
+        return what, "not killed (the run ended first)"
+    t99 = "never" if r["t99_s"] is None else f"{r['t99_s']:.0f} s"
+    restarts = ", ".join(f"{k} x{n}" for k, n in r["restarts"].items()) or "none"
+    return what, f"t99 {t99}, lost {100 * r['lost_share_max']:.2f} %, restarts {restarts}"
+
+
+@bench_app.command("faults")
+def bench_faults(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    worlds: str = typer.Option("office,data:maze", help="Worlds, comma separated."),
+    seeds: int = typer.Option(5, min=1, help="Seeds per world (each draws victim and moment)."),
+    robots: int = typer.Option(3, min=1, help="Robots per run."),
+    wall_limit: float = typer.Option(1500.0, help="Wall-clock seconds per run, at most."),
+    out: Path = typer.Option(Path("runs/bench-faults"), help="Folder of the runs."),
+) -> None:
+    """SIGKILL of one process (agent, simulator or coordinator) from outside at a random
+    moment of each run: does the exploration still reach 99 %, and is anything a robot
+    shared missing from the merged map?"""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import faults
+
+    with Console(stderr=True).status("faults") as status:
+        res = faults.run(
+            tuple(w for w in worlds.split(",") if w),
+            seeds,
+            robots,
+            wall_limit,
+            out,
+            lambda what: status.update(f"faults: {what}"),
+        )
+    _save(save, res)
+    rows = [_fault_row(r) for r in res["runs"]]
+    ok = f"{res['runs_ok']} of {res['runs_total']}"
+    rows.append(("runs reaching 99 % with nothing lost", ok))
+    _emit(res, as_json, f"Faults: {robots} robots, one process killed per run", rows)
 
 
 @bench_app.command("load")
