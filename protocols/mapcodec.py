@@ -7,7 +7,8 @@ Layout (normative text in ``PROTOCOL.md``)::
     delta = msgpack {"t": "polymap-delta", "v": 1, "cs": cell size (units), "base": n, "ver": n,
                      "cells": bin}
     merge = msgpack {"t": "polymap-merge", "v": 1, "b": bin}     (a MergeOp, see below)
-    correct = msgpack {"t": "polymap-correct", "v": 1, "b": bin}  (a CorrectionOp, below)
+    correct = msgpack {"t": "polymap-correct", "v": 1, "b": bin}  (a CorrectionOp, below;
+              "bz": zlib(bin) instead of "b" when that is smaller)
 
 A full map carries the explored space as polygons across cell borders (the receiver
 cuts them into cells again; sectors on cell borders are implied). A delta carries the
@@ -35,10 +36,10 @@ sender's map, ``polymap.MergeOp``) is one varint sequence::
 
 A correction (keyframes moved by a loop closure, ``polyswarm.follow.CorrectionOp``)::
 
-    b: cs base digest n  (did zz(dx) zz(dy) zz(dtheta))[n]
+    b: cs base digest n  (did zz(ddx) zz(ddy) zz(ddtheta))[n]
        did: the id's step from the previous entry's (the first from -1: ids ascend);
-       dx dy dtheta: the keyframe's move from where the receiver holds it, in mm and
-       10 urad; the version is base + 1
+       ddx ddy ddtheta: the keyframe's move from where the receiver holds it (mm and
+       10 urad) less the previous entry's move (the first's from 0); version base + 1
 
 A unit is 10 micrometres (the map's precision grid, so deltas lose nothing); ``q`` is the
 largest quantum dividing all coordinates (100 units for whole maps shared at 1 mm and for
@@ -52,6 +53,7 @@ builds a new map object, so a bad message never touches an existing map.
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import astuple, fields
 
 import msgpack
@@ -204,9 +206,14 @@ def encode_correction(op: CorrectionOp) -> bytes:
     ids = np.diff(np.concatenate([[-1], rows[:, 0]]))
     if (ids <= 0).any():
         raise PolyswarmError("a correction's keyframe ids must ascend")
-    cols = np.column_stack([ids.astype(np.uint64), zigzag(rows[:, 1:]).reshape(-1, 3)])
+    # consecutive keyframes move alike: each move as its difference from the previous one's
+    moves = np.diff(np.vstack([np.zeros((1, 3), dtype=np.int64), rows[:, 1:]]), axis=0)
+    cols = np.column_stack([ids.astype(np.uint64), zigzag(moves).reshape(-1, 3)])
     head = [_cell_units(op.cell_size), op.base_version, op.digest, len(rows)]
     body = encode_varints(np.concatenate([np.array(head, dtype=np.uint64), cols.ravel()]))
+    packed = zlib.compress(body, 9)  # the moves repeat themselves: 39 % smaller on aces
+    if len(packed) < len(body):
+        return msgpack.packb({"t": CORRECTION_TYPE, "v": FORMAT_VERSION, "bz": packed})
     return msgpack.packb({"t": CORRECTION_TYPE, "v": FORMAT_VERSION, "b": body})
 
 
@@ -396,6 +403,20 @@ def decode_merge(data: bytes) -> MergeOp:
     return MergeOp(cell_u / UNITS_PER_M, base, version, poly, MergeOptions(*opts), digest, keyframe)
 
 
+def _inflate(data, field: str) -> bytes:
+    """zlib data, at most ``MAX_MESSAGE_BYTES`` once inflated."""
+    if not isinstance(data, bytes):
+        raise DecodeError(f"field {field!r} must be binary")
+    d = zlib.decompressobj()
+    try:
+        out = d.decompress(data, MAX_MESSAGE_BYTES)
+    except zlib.error as e:
+        raise DecodeError(f"field {field!r}: not zlib data ({e})") from None
+    if d.unconsumed_tail or not d.eof:
+        raise DecodeError(f"field {field!r}: truncated or too large once inflated")
+    return out
+
+
 def _pose(v: np.ndarray, what: str) -> tuple[int, int, int]:
     x, y, th = (int(a) for a in v)
     if max(abs(x), abs(y)) > MAX_POSE_UNITS or abs(th) > MAX_ANGLE_UNITS:
@@ -406,7 +427,7 @@ def _pose(v: np.ndarray, what: str) -> tuple[int, int, int]:
 def decode_correction(data: bytes) -> CorrectionOp:
     """Decode a correction; any defect raises ``DecodeError``."""
     obj = _unpack(data, CORRECTION_TYPE)
-    body = obj.get("b")
+    body = obj.get("b") if "bz" not in obj else _inflate(obj.get("bz"), "bz")
     if not isinstance(body, bytes):
         raise DecodeError("field 'b' must be binary")
     r = _Reader(decode_varints(body))
@@ -421,7 +442,10 @@ def decode_correction(data: bytes) -> CorrectionOp:
     if ((vals[:, 0] < 1) | (vals[:, 0] > MAX_POSE_UNITS)).any():
         raise DecodeError("keyframe id steps must be 1 to 2**40")
     ids = np.cumsum(vals[:, 0].astype(np.int64)) - 1
-    steps = unzigzag(vals[:, 1:])
+    diffs = unzigzag(vals[:, 1:])
+    if ((diffs < -2 * MAX_POSE_UNITS) | (diffs > 2 * MAX_POSE_UNITS)).any():
+        raise DecodeError("keyframe move differences too large")
+    steps = np.cumsum(diffs, axis=0)
     moves = tuple(
         (int(k), _pose(d, f"move of keyframe {k}")) for k, d in zip(ids, steps, strict=True)
     )

@@ -114,6 +114,23 @@ def test_the_correction_decoder_refuses_bad_bytes():
         encode_correction(dataclasses.replace(op, moves=op.moves[::-1]))
 
 
+def test_a_long_correction_goes_compressed_and_bad_compressed_bytes_are_refused():
+    import zlib
+
+    import msgpack
+
+    moves = tuple((k, (40 + k % 3, -25, 120)) for k in range(0, 400, 2))  # alike, as a loop's
+    op = CorrectionOp(2.0, 10, 11, moves, 7)
+    wire = encode_correction(op)
+    assert "bz" in msgpack.unpackb(wire) and len(wire) < 2 * len(moves)
+    assert decode_correction(wire) == op
+    bomb = zlib.compress(b"\x00" * (300 * 1024 * 1024))  # 300 MB of zeros once inflated
+    for bz in (b"not zlib", bomb, zlib.compress(b"\x01")[:-3], "text"):
+        raw = msgpack.packb({"t": "polymap-correct", "v": 1, "bz": bz})
+        with pytest.raises(DecodeError):
+            decode_correction(raw)
+
+
 def test_slam_following_the_graph_sends_corrections_a_receiver_and_the_coordinator_follow(
     shared_data,
 ):

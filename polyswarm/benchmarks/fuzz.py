@@ -63,7 +63,10 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
             decode_merge,
             [(golden / n).read_bytes() for n in ("merge_v1.bin", "merge_keyframe_v1.bin")],
         ),
-        "correction": (decode_correction, [(golden / "correct_v1.bin").read_bytes()]),
+        "correction": (
+            decode_correction,
+            [(golden / "correct_v1.bin").read_bytes(), _long_correction()],
+        ),
         "whole map as cells": (decode_any_map, [encode_cells_map(golden_maps()[1])]),
         "ros-laserscan": (ros.decode_laserscan, [ros.encode_laserscan(scan)]),
         "ros-odometry": (ros.decode_odometry, [ros.encode_odometry(1.0, (1.0, 2.0, 0.5))]),
@@ -74,6 +77,15 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
             [rmw_zenoh.encode_attachment(3, 1_700_000_000_000_000_000, bytes(range(16)))],
         ),
     }
+
+
+def _long_correction() -> bytes:
+    """A correction long enough to go compressed ("bz")."""
+    from polyswarm.follow import CorrectionOp
+    from protocols.mapcodec import encode_correction
+
+    moves = tuple((k, (30 + k % 5, -12, 90)) for k in range(0, 120, 3))
+    return encode_correction(CorrectionOp(2.0, 3, 4, moves, 99))
 
 
 def _tf_seed() -> bytes:
