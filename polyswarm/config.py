@@ -279,8 +279,8 @@ class SlamConfig:
     # after a loop closure, the cells of keyframes it moved are merged again at their
     # new poses (polyswarm.follow), and the correction goes to the coordinator as poses
     # (PROTOCOL.md 3.5): the shared map loses the ghosts of the pose errors made before
-    # the loop closed (ACES, real odometry: 58 % ghost walls -> 0.2 %). The cost: a
-    # correction takes 0.3-2 s on the logs' 360-beam, 80 m scans (polyswarm bench slam)
+    # the loop closed (ACES, real odometry: 58 % ghost walls -> 0.8 %). The cost: one
+    # correction's p95 is 0.4-1.6 s on the logs (polyswarm bench slam)
     map_follows_graph: bool = True
     obstacle_max_gap_m: float = positive(0.5, 100.0)  # points farther apart: a frontier...
     obstacle_gap_beams: float = num(4.0, 0.0, 1000.0)  # ...unless this many beam spacings

@@ -62,6 +62,7 @@ POSE_UNITS_PER_RAD = 100_000
 # keyframes merged per pass when cells are rebuilt, when one pass of all of them fails
 # (GEOS): the rebuilt cells depend on it, so it is part of the protocol
 FALLBACK_BATCH = 8
+
 QPose = tuple[int, int, int]  # a pose in wire units
 
 
