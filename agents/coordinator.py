@@ -42,7 +42,7 @@ from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmErro
 from polyswarm.explore import GraphIndex, Reach, Strategy, assign, target_groups
 from polyswarm.follow import Atlas, CorrectionOp, replay_correction
 from polyswarm.navgraph import NavGraph, clear_of
-from polyswarm.polymap import Cell, GridPolyMap, MapDelta, MergeOp, MergeOptions, VectorType
+from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions, VectorType
 from polyswarm.targets import Sensor, Target, TargetCache, frontier_targets
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import (
@@ -392,16 +392,7 @@ class Coordinator:
         except PolyswarmError as e:  # the cells keep their content; robots' next changes retry
             log.error("merged cells could not be rebuilt after a correction: %s", e)
             return set()
-        version = self.merged.version + 1
-        out = dict(self.merged.cells)
-        for ix in todo:
-            new, old = fresh.map.cells.get(ix), out.get(ix)
-            if new is None and old is None:
-                continue
-            if new is not None and old is not None and new.same_content(old):
-                continue
-            out[ix] = (new or Cell(ix, self.merged.cell_size, ())).with_version(version)
-        self.merged = GridPolyMap(self.merged.cell_size, out, version)
+        self.merged, _ = self.merged.with_cells_of(fresh.map, todo)
         return todo
 
     def spent(self, stage: str, wall_ms: float, cpu_ms: float) -> None:

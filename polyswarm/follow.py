@@ -230,26 +230,15 @@ def apply_moves(
         rebuild |= _cells_of(pmap, atlas, kid)
         atlas.move(kid, moves[kid])
         rebuild |= _cells_of(pmap, atlas, kid)
-    version = pmap.version + 1
-    cs = pmap.cell_size
-    cells = dict(pmap.cells)
-    changed = []
-    fresh, merged = _rebuild_window(pmap, atlas, rebuild)
-    for ix in sorted(rebuild):
-        new, old = fresh.cells.get(ix), cells.get(ix)
-        if new is None and old is None:
-            continue
-        if new is not None and old is not None and new.same_content(old):
-            continue
-        cells[ix] = (new or Cell(ix, cs, ())).with_version(version)
-        changed.append(cells[ix])
+    fresh, merged = _rebuild_window(pmap, atlas, rebuild) if rebuild else (pmap, 0)
+    out, changed = pmap.with_cells_of(fresh, rebuild)
     info = {
         "moved": len(moves),
         "cells": len(changed),
         "keyframes": merged,
         "ms": (time.perf_counter() - t0) * 1e3,
     }
-    return GridPolyMap(cs, cells, version), changed, info
+    return out, changed, info
 
 
 def _rebuild_window(

@@ -104,6 +104,25 @@ class GridPolyMap(Merging, MapQueries):
             out[c.index] = c
         return GridPolyMap(self.cell_size, out, delta.version)
 
+    def with_cells_of(
+        self, other: GridPolyMap, indices: Iterable[CellIndex]
+    ) -> tuple[GridPolyMap, list[Cell]]:
+        """This map with the cells ``indices`` taken from ``other`` (a part rebuilt
+        afresh; a cell ``other`` lacks becomes empty), at the next version; and the cells
+        whose content changed (a ``cells_digest``'s input)."""
+        version = self.version + 1
+        cells = dict(self.cells)
+        changed = []
+        for ix in sorted(indices):
+            new, old = other.cells.get(ix), cells.get(ix)
+            if new is None and old is None:
+                continue
+            if new is not None and old is not None and new.same_content(old):
+                continue
+            cells[ix] = (new or Cell(ix, self.cell_size, ())).with_version(version)
+            changed.append(cells[ix])
+        return GridPolyMap(self.cell_size, cells, version), changed
+
     def replay(self, op: MergeOp) -> MergeResult:
         """Apply a ``MergeOp`` by merging its polygon again (this map must be a
         bit-identical copy of the sender's at ``op.base_version``). An op already applied

@@ -28,15 +28,12 @@ from protocols.mapcodec import encode_correction, encode_delta, encode_map, enco
 
 HERE = Path(__file__).parent
 O, F = VectorType.OBSTACLE, VectorType.FRONTIER
+SLAM_OPTIONS = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)  # the golden merges' options
 
 
 def golden_maps() -> tuple[GridPolyMap, GridPolyMap]:
     """A 3 m x 1.5 m room with a pillar, then a corridor added to it."""
-    room = TypedPolygon(
-        Ring([(0.5, 0.5), (3.5, 0.5), (3.5, 2.0), (0.5, 2.0)], [O, F, O, O]),
-        (Ring([(1.0, 1.0), (1.0, 1.2), (1.3, 1.2), (1.3, 1.0)], [O] * 4),),
-    )
-    corridor = TypedPolygon(Ring([(3.4, 1.0), (6.0, 1.0), (6.0, 1.6), (3.4, 1.6)], [O, F, O, F]))
+    room, corridor = _golden_polygons()
     a = GridPolyMap(2.0).merge(room).map
     b = a.merge(corridor).map
     return a, b
@@ -45,8 +42,8 @@ def golden_maps() -> tuple[GridPolyMap, GridPolyMap]:
 def golden_merge() -> tuple[GridPolyMap, MergeOp]:
     """The corridor of ``golden_maps`` sent as a merge into the room, with SLAM's options."""
     a, _ = golden_maps()
-    corridor = TypedPolygon(Ring([(3.4, 1.0), (6.0, 1.0), (6.0, 1.6), (3.4, 1.6)], [O, F, O, F]))
-    options = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
+    _, corridor = _golden_polygons()
+    options = SLAM_OPTIONS
     res = a.merge(corridor, options)
     digest = cells_digest(res.map.cells[i] for i in res.changed)
     return a, MergeOp(2.0, a.version, res.map.version, corridor, options, digest)
@@ -60,7 +57,7 @@ def golden_correction():
     from polyswarm.follow import Atlas, correct, pose_of
 
     room, corridor = _golden_polygons()
-    options = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
+    options = SLAM_OPTIONS
     pmap, atlas, ops = GridPolyMap(2.0), Atlas(), []
     for kid, poly in enumerate([room, corridor]):
         res = pmap.merge(poly, options)
@@ -76,6 +73,7 @@ def golden_correction():
 
 
 def _golden_polygons() -> tuple[TypedPolygon, TypedPolygon]:
+    """The golden room (with a pillar) and the corridor beside it."""
     room = TypedPolygon(
         Ring([(0.5, 0.5), (3.5, 0.5), (3.5, 2.0), (0.5, 2.0)], [O, F, O, O]),
         (Ring([(1.0, 1.0), (1.0, 1.2), (1.3, 1.2), (1.3, 1.0)], [O] * 4),),
