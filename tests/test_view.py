@@ -72,13 +72,22 @@ def _page_map(page) -> tuple[int, int]:
     )
 
 
+# The coordinator's queryable serves its map dissolved at 1 mm and cut into cells again;
+# the page follows the exact deltas (and starts from, or resyncs to, such a 1 mm map).
+# Cutting again can join or split a polygon that touches a cell border (measured: the two
+# counts differed by 1 of 103 in one CI run, and agreed at 30 of 30 versions of a
+# 2-robot office run), so the counts are compared within that.
+POLYGON_COUNT_SLACK = 2
+
+
 def _same_as_coordinator(page, bus, swarm: str, tries: int = 60) -> tuple[int, int]:
     """(version, polygons) once the page shows the coordinator's current map version."""
     for _ in range(tries):
         coord = _fetch_merged(bus, swarm)
         ver, shown = _page_map(page)
         if coord is not None and coord.version == ver:
-            assert shown == coord.polygon_count(), (shown, coord.polygon_count())
+            want = coord.polygon_count()
+            assert abs(shown - want) <= POLYGON_COUNT_SLACK, (shown, want)
             return ver, shown
         time.sleep(0.3)
     raise AssertionError("the page never showed the coordinator's map version")
@@ -121,7 +130,7 @@ def test_launch_view_in_headless_chromium(tmp_path):
             page.wait_for_selector("path.explored", timeout=60_000)
             page.wait_for_selector("#robot-r1 circle", timeout=60_000)
             page.wait_for_selector("circle.target", timeout=60_000)  # frontier targets
-            # the page holds the coordinator's merged map, polygon for polygon
+            # the page holds the coordinator's merged map (polygon counts within the re-cut)
             ver, polygons = _same_as_coordinator(page, bus, swarm)
             assert polygons > 0
             # each robot's marker moves between two reads
