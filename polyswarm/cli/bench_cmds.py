@@ -640,7 +640,8 @@ def bench_cells(
 
 
 def _fault_row(r: dict) -> tuple[str, str]:
-    what = f"{r['world']} seed {r['seed']}: {r['victim']} killed at {r['kill_after_wall_s']:.0f} s"
+    at = f"{r['kill_at_sim_s']:.0f} s simulated"
+    what = f"{r['world']} seed {r['seed']}: {r['victim']} killed at {at}"
     if not r["killed"]:
         return what, "not killed (the run ended first)"
     t99 = "never" if r["t99_s"] is None else f"{r['t99_s']:.0f} s"
