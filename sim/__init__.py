@@ -4,7 +4,14 @@ Independent of ``agents`` and ``protocols``; the ``polyswarm sim`` command wires
 Zenoh. Headless (pybullet DIRECT) unless asked for a GUI.
 """
 
-from sim.simulation import CollisionEvent, Robot, ScanEvent, Simulation, spread_start_poses
+from sim.simulation import (
+    CollisionEvent,
+    Robot,
+    ScanEvent,
+    Simulation,
+    scattered_start_poses,
+    spread_start_poses,
+)
 from sim.world import PROCEDURAL, World, load_world, procedural_world, world_from_grid
 
 __all__ = [
@@ -16,6 +23,7 @@ __all__ = [
     "World",
     "load_world",
     "procedural_world",
+    "scattered_start_poses",
     "spread_start_poses",
     "world_from_grid",
 ]

@@ -554,3 +554,33 @@ def spread_start_poses(
     if len(poses) < n:
         raise SimulationError(f"could not place {n} robots near the start of {world.name!r}")
     return poses
+
+
+SCATTER_SEPARATION_M = 10.0  # robots placed "anywhere" start at least this far apart...
+SCATTER_CANDIDATES = 4000  # ...out of this many random free spots (fewer apart if need be)
+
+
+def scattered_start_poses(
+    world: World, n: int, radius: float, seed: int, min_separation_m: float = SCATTER_SEPARATION_M
+) -> list[tuple[float, float, float]]:
+    """N robots at random free poses with random headings, seeded: the start poses nobody
+    measured. Each is at least ``min_separation_m`` from the others where the world
+    allows; where it does not, the separation is halved until they fit."""
+    safe = world.free.buffer(-(radius + SPAWN_CLEARANCE_M))
+    if safe.is_empty:
+        raise SimulationError(f"world {world.name!r} has no room for a robot of radius {radius} m")
+    rng = np.random.default_rng(seed)
+    x0, y0, x1, y1 = safe.bounds
+    xy = rng.uniform((x0, y0), (x1, y1), size=(SCATTER_CANDIDATES, 2))
+    xy = xy[shapely.contains_xy(safe, xy[:, 0], xy[:, 1])]
+    heading = rng.uniform(-math.pi, math.pi, size=len(xy))
+    sep = min_separation_m
+    while sep >= 2 * radius + 2 * SPAWN_CLEARANCE_M:
+        chosen: list[int] = []
+        for k in range(len(xy)):  # first fit in the random order
+            if all(np.hypot(*(xy[k] - xy[c])) >= sep for c in chosen):
+                chosen.append(k)
+                if len(chosen) == n:
+                    return [(float(xy[k][0]), float(xy[k][1]), float(heading[k])) for k in chosen]
+        sep /= 2
+    raise SimulationError(f"could not place {n} robots apart in {world.name!r}")

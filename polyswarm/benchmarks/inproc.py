@@ -43,9 +43,12 @@ def explore_in_process(
     on_keyframe: KeyframeHook | None = None,
     stop_coverage: float = 1.01,
     on_step: Callable[[object, list, object], None] | None = None,
+    start_poses: list | None = None,
 ) -> InProcessRun:
     """``on_step(sim, agents, coordinator)`` is called after every simulation step with
-    scans (for instrumentation)."""
+    scans (for instrumentation). ``start_poses`` (x m, y m, theta rad) per robot: the
+    robots' true starts, also given to the coordinator (default: side by side at the
+    world's start)."""
     import shapely
 
     from agents.coordinator import Coordinator
@@ -63,7 +66,7 @@ def explore_in_process(
 
     cfg = cfg or Config()
     world = load_world(world_name, seed=seed)
-    starts = spread_start_poses(world, robots, cfg.sim.robot.radius_m)
+    starts = start_poses or spread_start_poses(world, robots, cfg.sim.robot.radius_m)
     cfg = dataclasses.replace(
         cfg,
         sim=dataclasses.replace(cfg.sim, seed=seed),

@@ -760,3 +760,53 @@ def fuzz_cmd(
     crashed = {n: r["examples"] for n, r in res.items() if r["crashes"]}
     if crashed:
         raise PolyswarmError(f"decoders crashed: {crashed}")
+
+
+@bench_app.command("merge")
+def bench_merge(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    worlds: str = typer.Option("office,rooms,loop,cross,maze", help="Worlds, comma separated."),
+    seeds: int = typer.Option(5, min=1, help="Seeds per world (starts, headings, noise)."),
+    robots: int = typer.Option(3, min=2, help="Robots per run."),
+    profile: str = typer.Option("thesis", help="Robot profiles, comma separated."),
+) -> None:
+    """Maps of robots with unknown starts: polyswarm's map matching against the peer
+    method (multirobot_map_merge's feature-based grid merging) at the same moments."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import merge
+
+    with Console(stderr=True).status("merge") as status:
+        res = merge.run(
+            tuple(w for w in worlds.split(",") if w),
+            seeds,
+            robots,
+            tuple(p for p in profile.split(",") if p),
+            lambda what: status.update(f"merge: {what}"),
+        )
+    _save(save, res)
+    if as_json:
+        typer.echo(json.dumps(res, indent=2, default=float))
+        return
+    from rich.table import Table
+
+    t = Table(
+        title=f"Unknown starts: robot k's map against robot 1's, every {res['snapshot_s']:.0f} s"
+    )
+    cols = ("method", "accepted", "correct", "wrong", "err p50 m", "err max m", "merged")
+    for col in (*cols, "delay p50 s", "final err max m"):
+        t.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
+    for name, m in res["methods"].items():
+        t.add_row(
+            name,
+            str(m["accepted"]),
+            str(m["correct"]),
+            str(m["wrong"]),
+            "-" if m["err_m_median"] is None else f"{m['err_m_median']:.3f}",
+            "-" if m["err_m_max"] is None else f"{m['err_m_max']:.2f}",
+            f"{m['pairs_merged_correctly']} of {m['pairs_overlapping']}",
+            "-" if m["delay_s_median"] is None else f"{m['delay_s_median']:.0f}",
+            "-" if m["final_err_m_max"] is None else f"{m['final_err_m_max']:.3f}",
+        )
+    Console().print(t)

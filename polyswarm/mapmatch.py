@@ -1,0 +1,398 @@
+"""Where is another robot's map in ours? Two PolyMaps registered with no pose prior.
+
+Robots whose start poses nobody measured build maps in frames of their own. This finds
+the pose of map B's frame in map A's frame, or says why it cannot:
+
+1. *Search.* Both maps are rasterised at ``RESOLUTION_M``: A's walls as a hit score (a
+   Gaussian of the distance to its obstacle vectors) and A's *clear* space (explored, and
+   deeper inside it than ``CLEAR_M``); B the same. For every heading on a
+   ``HEADING_STEP_RAD`` grid, one FFT correlation scores every translation at once:
+   B's walls on A's walls, minus ``CONFLICT_WEIGHT`` x (B's walls in A's clear space +
+   A's walls in B's clear space). Free space is what makes PolyMaps good at this: a
+   wall seen through space the other robot drove through is evidence against a pose.
+2. *Refine.* The best peaks (``PEAKS``, apart by ``PEAK_APART_M``) are refined by
+   point-to-line ICP of B's wall points on A's walls.
+3. *Verify.* At the refined pose: the explored overlap, the length of wall both maps
+   agree on, and the share of each map's walls standing in the other's clear space.
+   A match is accepted only with enough overlap and agreeing wall, few conflicts, and
+   no other peak nearly as good elsewhere (repeated rooms, symmetric corridors).
+
+    m = match_maps(a, b)   # m.accepted, m.pose (B's frame in A's), m.reason, evidence
+
+The coordinator does not trust one match: see ``FrameEstimate`` for the agreement it
+asks of successive matches before a robot's map is merged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+import shapely.affinity
+from PIL import Image, ImageDraw
+from scipy import fft
+from scipy.ndimage import distance_transform_edt
+from scipy.spatial import cKDTree
+
+from polyswarm.errors import PolyswarmError
+from polyswarm.icp import sample_vectors
+from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
+from polyswarm.se2 import compose, inverse, transform_points, wrap
+
+RESOLUTION_M = 0.10  # search raster: a 2-degree heading step moves a point 10 m out 0.35 m
+HEADING_STEP_RAD = math.radians(2.0)  # every heading is tried: no Manhattan assumption
+HIT_SIGMA_M = 0.15  # a wall point this far from the other's wall scores exp(-1/2)
+CLEAR_M = 0.30  # explored space deeper than this inside is "clear" (noise, corners)
+CONFLICT_WEIGHT = 2.0  # a wall in the other's clear space costs two agreeing points
+PEAKS = 6  # candidate poses refined by ICP
+PEAK_APART_M = 1.0  # candidates closer than this (same heading) are one peak
+PEAK_POOL = 400  # the best raster positions of a heading that peaks are picked from
+WALL_STEP_M = 0.10  # wall points are sampled this far apart (agreeing length = count x step)
+
+ICP_ITERATIONS = 25
+ICP_OUTLIER_M = (0.6, 0.15)  # correspondence cut-off, from the search's blur to the noise
+NORMAL_WEIGHT_M = 0.3  # opposite wall faces are 0.6 m apart in the matching space
+
+INLIER_M = 0.15  # a wall point this close to the other's wall agrees with it
+MIN_OVERLAP_M2 = 10.0  # explored area both maps share, at least (about two rooms' worth)
+MIN_AGREEING_WALL_M = 12.0  # wall length both maps see in the same place, at least
+MIN_AGREEING_SHARE = 0.5  # of the walls inside the shared space, at least this share agree
+MAX_CONFLICT_SHARE = 0.01  # of the walls in the shared space, at most this share stand in
+# the other's clear space (a 5 m shift along the office's row of rooms: 4-8 %)
+VERIFY_CONFLICT_WEIGHT = 10.0  # a wall in the other's clear space undoes ten agreeing points
+MAX_RIVAL_RATIO = 0.85  # another pose (> RIVAL_APART) scoring this share of the best: ambiguous
+RIVAL_APART_M = 1.0
+RIVAL_APART_RAD = math.radians(10.0)
+
+
+class MatchError(PolyswarmError):
+    """The maps cannot be matched at all (one of them holds no walls)."""
+
+
+@dataclass(frozen=True)
+class MapMatch:
+    """The pose of B's frame in A's (x m, y m, theta rad) and the evidence for it."""
+
+    pose: np.ndarray
+    accepted: bool
+    reason: str  # why not accepted ("" when accepted)
+    overlap_m2: float
+    agreeing_wall_m: float
+    agreeing_share: float
+    conflict_share: float
+    rival_ratio: float  # the best other pose's score / this one's
+    score: float
+    candidates: int = field(default=0)
+
+    def summary(self) -> str:
+        x, y, th = self.pose
+        return (
+            f"pose ({x:.2f} m, {y:.2f} m, {math.degrees(th):.1f} deg), overlap "
+            f"{self.overlap_m2:.1f} m2, agreeing wall {self.agreeing_wall_m:.1f} m "
+            f"({self.agreeing_share:.0%}), conflicts {self.conflict_share:.1%}, rival "
+            f"{self.rival_ratio:.2f}" + ("" if self.accepted else f": {self.reason}")
+        )
+
+
+# -- the maps as rasters and points ------------------------------------------------------
+
+
+@dataclass
+class _MapView:
+    """What the search and the checks need of one map."""
+
+    walls: np.ndarray  # (n, 2) wall points every WALL_STEP_M
+    starts: np.ndarray  # obstacle vectors
+    ends: np.ndarray
+    region: shapely.Geometry  # explored space
+    lo: np.ndarray  # raster origin (m)
+    hit: np.ndarray  # Gaussian of the distance to a wall, on the raster
+    clear: np.ndarray  # 1 where explored, deeper inside than CLEAR_M
+    dist: np.ndarray  # distance to the nearest wall (m), on the raster
+    normals: np.ndarray  # (n, 2) unit normal of the vector each wall point lies on
+
+
+def _view(pmap: GridPolyMap) -> _MapView:
+    s, e, _ = pmap.vectors([VectorType.OBSTACLE])
+    if len(s) == 0:
+        raise MatchError("the map has no walls to match")
+    walls, owner = sample_vectors(s, e, WALL_STEP_M)
+    d = e[owner] - s[owner]
+    normals = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    region = pmap.explored_region()
+    x0, y0, x1, y1 = region.bounds
+    lo = np.array([x0, y0]) - 1.0
+    shape = (np.ceil((np.array([x1, y1]) + 1.0 - lo) / RESOLUTION_M)).astype(int) + 1
+    wall_px = np.ones(shape, dtype=bool)
+    ij = np.floor((walls - lo) / RESOLUTION_M).astype(int)
+    wall_px[ij[:, 0], ij[:, 1]] = False
+    dist = distance_transform_edt(wall_px) * RESOLUTION_M
+    hit = np.exp(-0.5 * (dist / HIT_SIGMA_M) ** 2)
+    explored = _rasterise(pmap, lo, shape)
+    # clear: deeper than CLEAR_M inside the explored space (from walls and frontiers alike:
+    # space seen only up to a frontier may end short of a wall the other robot saw)
+    clear = (distance_transform_edt(explored) * RESOLUTION_M > CLEAR_M).astype(float)
+    return _MapView(walls, s, e, region, lo, hit, clear, dist, normals)
+
+
+def _rasterise(pmap: GridPolyMap, lo: np.ndarray, shape) -> np.ndarray:
+    """Explored space on the raster (x index first)."""
+    img = Image.new("1", (int(shape[0]), int(shape[1])), 0)  # width = x, height = y
+    draw = ImageDraw.Draw(img)
+    polys = sorted(pmap.dissolve(0.01), key=lambda p: -abs(p.shell.signed_area))
+    for p in polys:  # larger shells first: an island in another's hole is drawn after it
+        for k, ring in enumerate(p.rings()):
+            px = [tuple(v) for v in ((ring.xy - lo) / RESOLUTION_M).tolist()]
+            if len(px) >= 3:
+                draw.polygon(px, fill=1 if k == 0 else 0)
+    return np.asarray(img, dtype=bool).T
+
+
+def _points_raster(xy: np.ndarray, shape) -> np.ndarray:
+    img = np.zeros(shape)
+    ij = np.floor(xy / RESOLUTION_M).astype(int)
+    np.add.at(img, (ij[:, 0], ij[:, 1]), 1.0)
+    return img
+
+
+# -- search ------------------------------------------------------------------------------
+
+
+def _search(a: _MapView, b: _MapView) -> list[tuple[float, np.ndarray]]:
+    """The best (score, pose of B's frame in A's) peaks over every heading."""
+    b_clear_xy = (np.argwhere(b.clear > 0) + 0.5) * RESOLUTION_M + b.lo
+    b_center = b.walls.mean(axis=0)
+    # B rotated about its centre: its points then fit in a square of its radius
+    pts = np.concatenate([b.walls, b_clear_xy]) - b_center
+    radius = float(np.hypot(pts[:, 0], pts[:, 1]).max())
+    nb = int(np.ceil(2 * radius / RESOLUTION_M)) + 2
+    shape = (a.hit.shape[0] + nb, a.hit.shape[1] + nb)
+    fshape = [fft.next_fast_len(n, real=True) for n in shape]
+    fa_walls = fft.rfft2(a.hit - CONFLICT_WEIGHT * a.clear, fshape)
+    a_walls_px = _points_raster(a.walls - a.lo, a.hit.shape)
+    fa_wall_pts = fft.rfft2(a_walls_px, fshape)
+    found: list[tuple[float, np.ndarray]] = []
+    for th in np.arange(-math.pi, math.pi, HEADING_STEP_RAD):
+        c, s = math.cos(th), math.sin(th)
+        rot = np.array([[c, -s], [s, c]])
+        off = np.full(2, radius + RESOLUTION_M)
+        bw = (b.walls - b_center) @ rot.T + off
+        bc = (b_clear_xy - b_center) @ rot.T + off
+        fbw = fft.rfft2(_points_raster(bw, (nb, nb)), fshape)
+        fbc = fft.rfft2(_points_raster(bc, (nb, nb)), fshape)
+        # correlation: B's walls on A's hit - conflicts; A's wall points in B's clear space
+        corr = fft.irfft2(
+            fa_walls * np.conj(fbw) - CONFLICT_WEIGHT * fa_wall_pts * np.conj(fbc), fshape
+        )
+        peaks = _peaks(corr, PEAKS)
+        for score, (di, dj) in peaks:
+            # B's point p (own frame) lands at A-raster index of (rot (p - c) + off) + d
+            d = np.array([di, dj], dtype=float)
+            d = np.where(d > np.array(fshape) / 2, d - np.array(fshape), d)
+            t = a.lo + d * RESOLUTION_M + off - rot @ b_center
+            found.append((score, np.array([t[0], t[1], th])))
+    found.sort(key=lambda f: -f[0])
+    return _distinct(found, PEAKS * 3)
+
+
+def _peaks(corr: np.ndarray, k: int) -> list[tuple[float, tuple[int, int]]]:
+    """The ``k`` best positive maxima of ``corr``, ``PEAK_APART_M`` apart."""
+    flat = corr.ravel()
+    top = np.argpartition(flat, -PEAK_POOL)[-PEAK_POOL:]
+    top = top[np.argsort(flat[top])[::-1]]
+    apart = PEAK_APART_M / RESOLUTION_M
+    out: list[tuple[float, tuple[int, int]]] = []
+    for i in top:
+        if flat[i] <= 0 or len(out) == k:
+            break
+        ij = np.unravel_index(i, corr.shape)
+        if all(math.hypot(ij[0] - o[0], ij[1] - o[1]) >= apart for _, o in out):
+            out.append((float(flat[i]), ij))
+    return out
+
+
+def _distinct(found: list, k: int) -> list[tuple[float, np.ndarray]]:
+    out: list[tuple[float, np.ndarray]] = []
+    for score, pose in found:
+        if all(not _close(pose, p, PEAK_APART_M, 2 * HEADING_STEP_RAD) for _, p in out):
+            out.append((score, pose))
+            if len(out) == k:
+                break
+    return out
+
+
+def _close(p: np.ndarray, q: np.ndarray, d_m: float, d_rad: float) -> bool:
+    return bool(np.hypot(*(p[:2] - q[:2])) < d_m and abs(wrap(p[2] - q[2])) < d_rad)
+
+
+# -- refine and verify -------------------------------------------------------------------
+
+
+def _wall_tree(v: _MapView) -> cKDTree:
+    """A's wall points with their normals (scaled): a point matches a wall face seen
+    from the same side only (the two faces of a thin wall are apart in normal space)."""
+    return cKDTree(np.hstack([v.walls, NORMAL_WEIGHT_M * v.normals]))
+
+
+def _icp(a: _MapView, tree: cKDTree, b: _MapView, pose: np.ndarray) -> np.ndarray:
+    """Point-to-line ICP of B's wall points (own frame) on A's walls, the outlier
+    cut-off shrinking over the first two thirds of the iterations."""
+    pose = pose.copy()
+    hold = 2 * ICP_ITERATIONS // 3
+    for k in range(ICP_ITERATIONS):
+        f = min(k / hold, 1.0)
+        cut = ICP_OUTLIER_M[0] + (ICP_OUTLIER_M[1] - ICP_OUTLIER_M[0]) * f
+        q = transform_points(pose, b.walls)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        nq = b.normals @ np.array([[c, s], [-s, c]])  # rotated normals
+        d, j = tree.query(np.hstack([q, NORMAL_WEIGHT_M * nq]), distance_upper_bound=cut)
+        ok = np.isfinite(d)
+        if ok.sum() < 10:
+            break
+        n, r0 = a.normals[j[ok]], q[ok] - a.walls[j[ok]]
+        res = np.einsum("ij,ij->i", r0, n)
+        # d(q)/d(theta) = perpendicular of (q - t)
+        dq = np.stack([-(q[ok, 1] - pose[1]), q[ok, 0] - pose[0]], axis=1)
+        J = np.stack([n[:, 0], n[:, 1], np.einsum("ij,ij->i", dq, n)], axis=1)
+        step = np.linalg.lstsq(J, -res, rcond=None)[0]
+        pose[:2] += step[:2]
+        pose[2] = wrap(pose[2] + step[2])  # about the current translation, as dq above
+        if k >= hold and np.abs(step).max() < 1e-5:
+            break
+    return pose
+
+
+def _lookup(v: _MapView, grid: np.ndarray, xy: np.ndarray, outside: float) -> np.ndarray:
+    ij = np.floor((xy - v.lo) / RESOLUTION_M).astype(int)
+    ok = (ij >= 0).all(axis=1) & (ij < grid.shape).all(axis=1)
+    out = np.full(len(xy), outside, dtype=float)
+    out[ok] = grid[ij[ok, 0], ij[ok, 1]]
+    return out
+
+
+def _evidence(a: _MapView, b: _MapView, pose: np.ndarray) -> dict:
+    """Overlap, agreeing wall and conflicts of B placed at ``pose`` in A."""
+    b_in_a = shapely.affinity.affine_transform(
+        b.region,
+        [
+            math.cos(pose[2]),
+            -math.sin(pose[2]),
+            math.sin(pose[2]),
+            math.cos(pose[2]),
+            pose[0],
+            pose[1],
+        ],
+    )
+    shared = shapely.intersection(a.region, b_in_a)
+    near = shapely.buffer(shared, CLEAR_M)
+    bw = transform_points(pose, b.walls)
+    aw = transform_points(inverse(pose), a.walls)  # A's walls in B's frame
+    bw_in = shapely.contains_xy(near, bw[:, 0], bw[:, 1])
+    aw_in = shapely.contains_xy(near, a.walls[:, 0], a.walls[:, 1])
+    agree_b = _lookup(a, a.dist, bw[bw_in], np.inf) <= INLIER_M
+    agree_a = _lookup(b, b.dist, aw[aw_in], np.inf) <= INLIER_M
+    conflict_b = _lookup(a, a.clear, bw, 0.0) > 0
+    conflict_a = _lookup(b, b.clear, aw, 0.0) > 0
+    inside = max(int(bw_in.sum() + aw_in.sum()), 1)
+    conflicts = int(conflict_b.sum() + conflict_a.sum())
+    agreeing = int(agree_b.sum() + agree_a.sum())
+    return {
+        "overlap_m2": float(shared.area),
+        "agreeing_wall_m": 0.5 * agreeing * WALL_STEP_M,
+        "agreeing_share": agreeing / inside,
+        "conflict_share": conflicts / inside,
+        # the score the verification ranks by: agreement less conflicts
+        "score": float(agreeing - VERIFY_CONFLICT_WEIGHT * conflicts),
+    }
+
+
+def _verdict(ev: dict, rival: float) -> str:
+    if ev["overlap_m2"] < MIN_OVERLAP_M2:
+        return f"overlap {ev['overlap_m2']:.1f} m2 < {MIN_OVERLAP_M2} m2"
+    if ev["agreeing_wall_m"] < MIN_AGREEING_WALL_M:
+        return f"agreeing wall {ev['agreeing_wall_m']:.1f} m < {MIN_AGREEING_WALL_M} m"
+    if ev["agreeing_share"] < MIN_AGREEING_SHARE:
+        return f"only {ev['agreeing_share']:.0%} of the shared walls agree"
+    if ev["conflict_share"] > MAX_CONFLICT_SHARE:
+        return f"{ev['conflict_share']:.1%} of the walls stand in the other's clear space"
+    if rival > MAX_RIVAL_RATIO:
+        return f"ambiguous: another pose scores {rival:.0%} of the best"
+    return ""
+
+
+def match_maps(a: GridPolyMap, b: GridPolyMap) -> MapMatch:
+    """The pose of map B's frame in map A's frame, with its evidence (see the module)."""
+    va, vb = _view(a), _view(b)
+    cands = _search(va, vb)
+    if not cands:
+        return MapMatch(np.zeros(3), False, "no candidate pose", 0, 0, 0, 1, 0, 0)
+    tree = _wall_tree(va)
+    refined = []
+    for _, pose in cands[:PEAKS]:
+        p = _icp(va, tree, vb, pose)
+        refined.append((p, _evidence(va, vb, p)))
+    refined.sort(key=lambda r: -r[1]["score"])
+    best, ev = refined[0]
+    rivals = [
+        r[1]["score"] for r in refined[1:] if not _close(r[0], best, RIVAL_APART_M, RIVAL_APART_RAD)
+    ]
+    rival = max(rivals, default=0.0) / max(ev["score"], 1e-9)
+    reason = _verdict(ev, rival)
+    return MapMatch(best, reason == "", reason, rival_ratio=rival, candidates=len(cands), **ev)
+
+
+def transform_map(pmap: GridPolyMap, pose) -> GridPolyMap:
+    """The map moved by ``pose`` (x m, y m, theta rad): cut into cells again, version 0."""
+    polys = []
+    for p in pmap.dissolve():
+        rings = [Ring(transform_points(pose, r.xy), r.types) for r in p.rings()]
+        polys.append(TypedPolygon(rings[0], tuple(rings[1:])))
+    return GridPolyMap.from_polygons(polys, pmap.cell_size)
+
+
+def frame_error(est, truth) -> tuple[float, float]:
+    """(metres, radians) between two poses of a frame."""
+    d = compose(inverse(np.asarray(truth, float)), np.asarray(est, float))
+    return float(np.hypot(d[0], d[1])), float(abs(wrap(d[2])))
+
+
+AGREE_M, AGREE_RAD = 0.3, math.radians(3.0)  # two matches within this are the same frame
+AGREE_MATCHES = 2  # accepted matches in a row that must agree before a frame is committed
+REVISE_MATCHES = 3  # accepted matches in a row that agree on another frame: revise it
+
+
+class FrameEstimate:
+    """One robot's frame in the shared one, from successive ``match_maps`` results.
+
+    One accepted match is not trusted: the frame is committed when ``AGREE_MATCHES``
+    accepted matches in a row (made as the maps grew) agree. Once committed, accepted
+    matches that contradict it are counted; ``REVISE_MATCHES`` in a row that agree among
+    themselves replace it (a wrong merge undone). Matches that are not accepted change
+    nothing."""
+
+    def __init__(self) -> None:
+        self.pose: np.ndarray | None = None  # the committed frame
+        self.run: list[np.ndarray] = []  # the latest accepted matches that agree
+        self.contradictions = 0
+        self.revisions = 0
+
+    def add(self, m: MapMatch) -> np.ndarray | None:
+        """The committed frame after ``m``."""
+        if not m.accepted:
+            return self.pose
+        if self.run and not _close(m.pose, self.run[-1], AGREE_M, AGREE_RAD):
+            self.run = []
+        self.run.append(m.pose)
+        if self.pose is None:
+            if len(self.run) >= AGREE_MATCHES:
+                self.pose = self.run[-1]
+        elif _close(m.pose, self.pose, AGREE_M, AGREE_RAD):
+            self.pose = m.pose  # the latest agreeing estimate (the maps grew)
+        else:
+            self.contradictions += 1
+            if len(self.run) >= REVISE_MATCHES:
+                self.pose, self.revisions = self.run[-1], self.revisions + 1
+        return self.pose

@@ -1,0 +1,152 @@
+"""Map-to-map registration without a pose prior, on buildings drawn by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import box
+
+from polyswarm.mapmatch import (
+    FrameEstimate,
+    MapMatch,
+    frame_error,
+    match_maps,
+    transform_map,
+)
+from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
+from polyswarm.se2 import inverse
+
+CELL_M = 2.0
+
+
+def _building() -> shapely.Geometry:
+    """A corridor with rooms of different sizes off it, a pillar in one: no symmetry."""
+    parts = [
+        box(0, 0, 24, 2),  # corridor
+        box(1, 2, 5, 7),
+        box(6, 2, 9, 5),
+        box(11, 2, 17, 8),
+        box(19, 2, 23, 4),
+        box(2, -6, 8, 0),
+        box(13, -3, 15, 0),
+        box(17, -7, 23, 0),
+    ]
+    doors_closed = shapely.union_all(parts)
+    return shapely.difference(doors_closed, box(19, -5, 20, -4))  # the pillar
+
+
+def _typed(region: shapely.Geometry, walls: shapely.Geometry) -> list[TypedPolygon]:
+    """Typed polygons of ``region``: edges on ``walls`` are obstacles, others frontiers."""
+    out = []
+    polys = [g for g in getattr(region, "geoms", [region]) if g.geom_type == "Polygon"]
+    for p in polys:
+        p = shapely.geometry.polygon.orient(p, 1.0)  # shell counter-clockwise, holes clockwise
+        rings = []
+        for ring in [p.exterior, *p.interiors]:
+            xy = np.asarray(ring.coords)[:-1]
+            mids = 0.5 * (xy + np.roll(xy, -1, axis=0))
+            on_wall = shapely.distance(walls, shapely.points(mids)) < 1e-6
+            types = np.where(on_wall, VectorType.OBSTACLE, VectorType.FRONTIER)
+            rings.append(Ring(xy, types))
+        out.append(TypedPolygon(rings[0], tuple(rings[1:])))
+    return out
+
+
+def _seen(window: shapely.Geometry, pose=(0.0, 0.0, 0.0)) -> GridPolyMap:
+    """The part of the building inside ``window``, as a robot whose frame is ``pose`` (in
+    the building's frame) would have mapped it."""
+    b = _building()
+    part = shapely.intersection(b, window)
+    m = GridPolyMap.from_polygons(_typed(part, b.boundary), CELL_M)
+    return transform_map(m, inverse(np.asarray(pose, dtype=float)))
+
+
+def test_transform_map_moves_the_explored_space_and_keeps_its_area():
+    m = _seen(box(-10, -10, 30, 10))
+    pose = np.array([3.0, -2.0, 0.7])
+    moved = transform_map(m, pose)
+    assert moved.explored_area() == pytest.approx(m.explored_area(), rel=1e-6)
+    back = transform_map(moved, inverse(pose))
+    assert shapely.symmetric_difference(back.explored_region(), m.explored_region()).area < 1e-3
+
+
+@pytest.mark.parametrize(
+    "pose", [(4.0, -3.0, 2.1), (-7.5, 12.0, -0.4), (0.3, 0.2, math.pi)], ids=str
+)
+def test_a_moved_part_of_the_building_is_found_where_it_is(pose):
+    a = _seen(box(-1, -8, 16, 9))  # the west two thirds
+    b = _seen(box(8, -8, 25, 9), pose)  # the east two thirds, in a frame at ``pose``
+    m = match_maps(a, b)
+    assert m.accepted, m.summary()
+    err_m, err_rad = frame_error(m.pose, pose)
+    assert err_m < 0.03 and err_rad < math.radians(0.3), m.summary()
+    assert m.overlap_m2 > 30 and m.conflict_share < 0.01
+
+
+def test_maps_that_share_no_space_are_not_merged():
+    a = _seen(box(-1, -8, 10, 9))
+    b = _seen(box(12, -8, 25, 9), (2.0, 1.0, 0.5))
+    m = match_maps(a, b)
+    assert not m.accepted
+    assert m.reason
+
+
+def test_a_square_room_fits_four_ways_and_is_not_merged():
+    room = box(0, 0, 6, 6)
+    a = GridPolyMap.from_polygons(_typed(room, room.boundary), CELL_M)
+    b = transform_map(a, (1.0, 2.0, 0.3))
+    m = match_maps(a, b)
+    assert not m.accepted
+    assert "ambiguous" in m.reason or "agreeing wall" in m.reason or "overlap" in m.reason
+
+
+def test_identical_rooms_in_a_row_are_ambiguous():
+    """Five identical rooms off a corridor; B saw two of them: any two fit."""
+    rooms = [box(5 * k, 2, 5 * k + 4, 7) for k in range(5)]
+    b_all = shapely.union_all([box(0, 0, 24, 2), *rooms])
+    a = GridPolyMap.from_polygons(_typed(b_all, b_all.boundary), CELL_M)
+    part = shapely.intersection(b_all, box(4.5, -1, 14.5, 8))
+    b = transform_map(GridPolyMap.from_polygons(_typed(part, b_all.boundary), CELL_M), (0, 0, 1.0))
+    m = match_maps(a, b)
+    assert not m.accepted
+    assert "ambiguous" in m.reason, m.summary()
+
+
+def _m(pose, accepted=True) -> MapMatch:
+    return MapMatch(np.asarray(pose, dtype=float), accepted, "", 50.0, 30.0, 0.9, 0.0, 0.1, 1.0)
+
+
+def test_a_frame_is_committed_only_when_successive_matches_agree():
+    f = FrameEstimate()
+    assert f.add(_m((1.0, 2.0, 0.1))) is None  # one match is not trusted
+    assert f.add(_m((5.0, 2.0, 0.1))) is None  # another frame: starts over
+    assert f.add(_m((0.0, 0.0, 0.0), accepted=False)) is None  # refused: changes nothing
+    got = f.add(_m((5.1, 2.0, 0.11)))
+    assert got is not None and np.allclose(got, (5.1, 2.0, 0.11))
+
+
+def test_a_committed_frame_is_revised_by_agreeing_contradictions_only():
+    f = FrameEstimate()
+    f.add(_m((1.0, 0.0, 0.0)))
+    f.add(_m((1.0, 0.05, 0.0)))
+    f.add(_m((9.0, 0.0, 0.0)))  # one contradiction: kept
+    assert np.allclose(f.pose, (1.0, 0.05, 0.0)) and f.contradictions == 1
+    f.add(_m((9.0, 0.1, 0.0)))
+    f.add(_m((9.1, 0.1, 0.0)))  # three in a row that agree: the frame was wrong
+    assert np.allclose(f.pose, (9.1, 0.1, 0.0)) and f.revisions == 1
+
+
+@pytest.mark.parametrize("features", ["akaze", "orb"])
+def test_the_peer_methods_grid_merging_finds_a_whole_moved_building(features):
+    """The baseline as a baseline should work: the same whole building, moved."""
+    from polyswarm.benchmarks.gridmerge import DEFAULT_THRESHOLD, Features, match_grids
+
+    pose = (2.0, 1.0, 0.3)
+    everything = box(-10, -10, 30, 10)
+    g = match_grids(_seen(everything), _seen(everything, pose), Features(features))
+    assert g.confidence >= DEFAULT_THRESHOLD
+    err_m, err_rad = frame_error(g.pose, pose)
+    assert err_m < 0.2 and err_rad < math.radians(1.0)
