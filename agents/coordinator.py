@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agents import persist
-from polyswarm.config import Config
+from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.explore import GraphIndex, Reach, Strategy, assign, target_groups
 from polyswarm.follow import Atlas, CorrectionOp, replay_correction
@@ -732,12 +732,16 @@ def _points_cm(points) -> tuple[tuple[float, float], ...]:
 
 def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = None) -> Coordinator:
     """Run the coordinator until ``stop`` is set (or SIGINT/SIGTERM)."""
+    from agents.anchoring import Anchoring
     from agents.session import Bus, is_alive_change, open_session, stop_on_signals
 
     stop = stop or stop_on_signals()
     keys = SwarmKeys(cfg.comms.swarm)
-    robots = {r.id: tuple(r.start) for r in cfg.robots}
+    starts = known_starts(cfg.robots)
+    robots = {rid: tuple(st) for rid, st in starts.items() if st is not None}
     coord = Coordinator(cfg, robots)
+    # robots whose start poses were not given explore alone until their frames are found
+    anchoring = Anchoring(cfg, [rid for rid, st in starts.items() if st is None])
     state_dir = cfg.persist.dir
     journal = persist.CoordinatorJournal(state_dir) if state_dir else None
     if state_dir:
@@ -773,12 +777,18 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         if alive is not None:
                             who = keys.alive_name(item.key)
                             if who is not None:
-                                coord.on_alive(who[1], alive)
+                                anchoring.owner(who[1], coord).on_alive(who[1], alive)
                             continue
                         rid = keys.robot_of(item.key)
                         if rid is None:
                             continue
                         msg = item.msg
+                        if isinstance(msg, Pose) and rid in anchoring.waiting:
+                            anchoring.on_pose(rid, msg.frame, msg.map_version, coord)
+                        owner = anchoring.owner(rid, coord)
+                        if owner is not coord:  # exploring alone: its own coordinator
+                            _robot_message(owner, rid, item, resync)
+                            continue
                         if isinstance(msg, Pose):
                             coord.on_pose(rid, item.stamp_s, msg)
                         elif isinstance(msg, RobotStatus):
@@ -820,25 +830,39 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 behind = set(coord.needs_resync()) - resync
                 coord.gaps += len(behind)  # a last delta lost: announced, never received
                 resync |= behind
+                for solo in anchoring.coordinators():
+                    resync |= set(solo.needs_resync())
                 for rid in list(resync):
+                    owner = anchoring.owner(rid, coord)
                     log.info("fetching the full map of %s", rid)
-                    coord.map_fetches += 1
-                    with coord.timed("fetch"):  # blocking: it delays the cycle
+                    owner.map_fetches += 1
+                    with owner.timed("fetch"):  # blocking: it delays the cycle
                         got = bus.fetch_map(keys.robot(rid).map, timeout_s=2.0)
-                    coord.robot(rid).behind_since = coord.now  # next try after a pause
+                    owner.robot(rid).behind_since = owner.now  # next try after a pause
                     if got is None:
                         continue
-                    coord.fetch_bytes += len(got[0])
+                    owner.fetch_bytes += len(got[0])
                     try:
-                        before = coord.robot(rid).map
-                        with coord.timed("fetch"):
-                            coord.on_robot_map(rid, decode_any_map(got[0]))
+                        before = owner.robot(rid).map
+                        with owner.timed("fetch"):
+                            owner.on_robot_map(rid, decode_any_map(got[0]))
                         resync.discard(rid)
-                        if coord.robot(rid).map is not before:
+                        if owner is coord and coord.robot(rid).map is not before:
                             with coord.timed("journal"):
                                 _journal(journal, "robot_map", rid, coord.robot(rid).map)
                     except PolyswarmError as e:
                         log.warning("map of %s refused: %s", rid, e)
+                for solo in anchoring.coordinators():  # their maps are not published
+                    if solo.flush_due():
+                        solo.flush()
+                    if solo.due():
+                        for rid, a in solo.cycle().assignments.items():
+                            solo.bytes_sent += bus.publish(
+                                keys.assignment(rid), a, solo.now, reliable=True
+                            )
+                now = max([coord.now, *(s.now for s in anchoring.coordinators())])
+                for rid, anchor in anchoring.tick(coord, now):
+                    coord.bytes_sent += bus.publish(keys.anchor(rid), anchor, now, reliable=True)
                 if coord.flush_due():
                     delta = coord.flush()
                     with coord.timed("publish"):
@@ -856,6 +880,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                             keys.coordinator_status, out.status, coord.now, reliable=True
                         )
         finally:
+            anchoring.close()
             bus.close()
             log.info(
                 "robot map updates: %d merges replayed, %d cell deltas applied, %d map fetches",
@@ -881,6 +906,28 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 if delta is not None:
                     _journal(journal, "merged", encode_delta(delta), coord.merged)
     return coord
+
+
+def _robot_message(c: Coordinator, rid: str, item, resync: set) -> None:
+    """A robot's pose, status or map update for a coordinator that keeps no journal (a
+    robot exploring alone, ``agents.anchoring``)."""
+    msg = item.msg
+    if isinstance(msg, Pose):
+        c.on_pose(rid, item.stamp_s, msg)
+    elif isinstance(msg, RobotStatus):
+        c.on_status(rid, item.stamp_s, msg)
+    elif isinstance(msg, MapChunk) and item.payload is not None:
+        try:
+            if msg.kind == MapKind.MERGE:
+                c.on_robot_merge(rid, item.stamp_s, decode_merge(item.payload))
+            elif msg.kind == MapKind.CORRECT:
+                c.on_robot_correction(rid, item.stamp_s, decode_correction(item.payload))
+            else:
+                c.on_robot_delta(rid, item.stamp_s, decode_delta(item.payload))
+        except MapError as e:
+            log.info("resync of %s: %s", rid, e)
+            c.gaps += 1
+            resync.add(rid)
 
 
 def _journal(journal: persist.CoordinatorJournal | None, what: str, *args) -> None:

@@ -27,7 +27,7 @@ import numpy as np
 from agents import persist
 from agents.behaviour import Behaviour
 from agents.seen import SeenObstacles
-from polyswarm.config import Config, SensorSource
+from polyswarm.config import Config, SensorSource, known_starts
 from polyswarm.control import ControlParams, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.follow import CorrectionOp
@@ -36,7 +36,7 @@ from polyswarm.odometry import OdometryBuffer
 from polyswarm.planner import Planner
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, VectorType
 from polyswarm.scan import LaserScan, beam_angles, deskew_motion, scan_to_points
-from polyswarm.se2 import transform_points
+from polyswarm.se2 import compose, transform_points
 from polyswarm.slam import PolySlam
 from protocols.keys import SwarmKeys, check_name
 from protocols.mapcodec import (
@@ -51,7 +51,9 @@ from protocols.mapcodec import (
 )
 from protocols.messages import (
     MAX_STATUS_PATH_POINTS,
+    Anchor,
     Assignment,
+    AssignmentKind,
     CoordinatorStatus,
     MapChunk,
     MapKind,
@@ -115,10 +117,20 @@ def safety_margin(lidar) -> float:
 
 
 class RobotAgent:
-    def __init__(self, robot_id: str, cfg: Config, start_pose=(0.0, 0.0, 0.0)) -> None:
+    def __init__(
+        self, robot_id: str, cfg: Config, start_pose=(0.0, 0.0, 0.0), frame_known: bool = True
+    ) -> None:
+        """``frame_known`` False: nobody gave the robot's start pose; it maps in a frame of
+        its own (its start, ``start_pose`` is then (0, 0, 0)) until an ``anchor`` puts
+        it into the shared frame (``agents.anchoring``)."""
         self.id = check_name(robot_id, "robot id")
         self.cfg = cfg
         self.start_pose = np.array(start_pose, dtype=float)
+        self.frame_known = frame_known
+        self.frame = 0  # the last anchor applied
+        self._anchor: Anchor | None = None  # the anchor SLAM applies at the next scan
+        # robots whose starts nobody gave: their poses mean nothing here until anchored
+        self._own_frames = {rid for rid, st in known_starts(cfg.robots).items() if st is None}
         lidar = cfg.sim.lidar
         self.slam = PolySlam(
             cfg.slam, cfg.map.cell_size_m, self.start_pose, out_of_range=lidar.out_of_range
@@ -194,21 +206,51 @@ class RobotAgent:
     def on_assignment(self, a: Assignment, now_s: float) -> None:
         self.behaviour.on_assignment(a, now_s, self.pose)
 
+    @property
+    def in_shared_frame(self) -> bool:
+        return self.frame_known or self.frame > 0
+
+    def on_anchor(self, a: Anchor) -> None:
+        """The coordinator found where this robot's frame lies in the shared one: SLAM
+        moves there at the next scan (an anchor already applied is ignored)."""
+        if a.frame <= max(self.frame, self._anchor.frame if self._anchor else 0):
+            return
+        log.info("%s: anchor %d: moving into the shared frame", self.id, a.frame)
+        self._anchor = a
+        self.slam.anchor((a.x, a.y, a.theta))
+
+    def _anchored(self, now_s: float) -> None:
+        """SLAM moved into the anchor's frame in this step: so do the start, goals, peers."""
+        a, self._anchor = self._anchor, None
+        frame = np.array([a.x, a.y, a.theta])
+        self.frame = a.frame
+        self.start_pose = compose(frame, self.start_pose)
+        self.behaviour.on_assignment(Assignment(AssignmentKind.STOP, -1), now_s, self.pose)
+        self.peers.clear()
+        self.merged = self.merged_graph = None  # the merged map is fetched afresh
+        log.info("%s: in the shared frame (anchor %d), at %s", self.id, a.frame, self.pose)
+
     def on_merged_map(self, pmap: GridPolyMap) -> None:
         """A full merged map (first contact or resync)."""
+        if not self.in_shared_frame:
+            return  # not in this robot's frame
         self.merged = pmap
         self.merged_graph = NavGraph.for_robot(pmap, self.cfg.nav)
 
     def on_merged_delta(self, delta: MapDelta) -> None:
         """Raises DeltaGapError when a delta was missed (fetch the full map)."""
+        if not self.in_shared_frame:
+            return
         if self.merged is None:
             raise DeltaGapError("no merged map yet")
         self.merged = self.merged.apply_delta(delta)
         self.merged_graph.update(self.merged, {c.index for c in delta.cells})
 
     def on_peer_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
-        if rid == self.id:
+        if rid == self.id or not self.in_shared_frame:
             return
+        if rid in self._own_frames and pose.frame == 0:
+            return  # a robot still in a frame of its own
         self.peers[rid] = (stamp_s, np.array([pose.x, pose.y]))
         self.behaviour.on_peer(rid, stamp_s, self.peers[rid][1], pose.blocked_by, self.pose)
 
@@ -229,7 +271,11 @@ class RobotAgent:
         masked = self._without_peers(scan, stamp_s)
         step = self.slam.process(masked, odom, motion)
         turned = abs(math.remainder(step.pose[2] - self.pose[2], 2 * math.pi))
+        if step.anchored:
+            turned = 0.0  # the frame moved, not the robot
         self.pose = step.pose
+        if step.anchored and self._anchor is not None:
+            self._anchored(stamp_s)
         if step.keyframe:
             self.stats.keyframes += 1
             self.stats.slam_ms.append(step.timings_ms.get("total", 0.0))
@@ -248,7 +294,7 @@ class RobotAgent:
         if stamp_s - self._last_pose_t >= POSE_PERIOD_S or step.delta is not None:
             self._last_pose_t = stamp_s
             blocked_by = self.behaviour.blocked_by
-            out.pose = Pose(*map(float, self.pose), self.slam.map.version, blocked_by)
+            out.pose = Pose(*map(float, self.pose), self.slam.map.version, blocked_by, self.frame)
         if self.behaviour.changed or stamp_s - self._last_status_t >= STATUS_PERIOD_S:
             self._last_status_t = stamp_s
             self.behaviour.changed = False
@@ -418,6 +464,7 @@ def run_agent(
     stop: threading.Event | None = None,
     duration_s: float = 0.0,
     attach=None,
+    frame_known: bool = True,
 ) -> RobotAgent:
     """Run the agent on a Zenoh session until ``stop`` is set (or SIGINT/SIGTERM).
 
@@ -429,7 +476,7 @@ def run_agent(
     stop = stop or stop_on_signals()
     keys = SwarmKeys(cfg.comms.swarm)
     me = keys.robot(robot_id)
-    agent = RobotAgent(robot_id, cfg, start_pose)
+    agent = RobotAgent(robot_id, cfg, start_pose, frame_known)
     state_dir = cfg.persist.dir
     if state_dir:
         saved = persist.load_agent(state_dir, robot_id)
@@ -456,6 +503,7 @@ def run_agent(
             sink = CommandSink(bus, me, cfg.agent, node)
             bus.subscribe(keys.all_robots("pose"), Pose)
             bus.subscribe(keys.assignment(robot_id), Assignment)
+            bus.subscribe(keys.anchor(robot_id), Anchor)
             bus.subscribe(keys.merged_delta, MapChunk)
             bus.subscribe(keys.coordinator_status, CoordinatorStatus)
             # all cells exactly: the coordinator's copy must be bit-identical to replay merges
@@ -507,6 +555,9 @@ def run_agent(
                         elif isinstance(msg, Assignment):
                             agent.on_assignment(msg, item.stamp_s)
                             sink.assignment(agent.assignment, item.stamp_s)
+                        elif isinstance(msg, Anchor):
+                            agent.on_anchor(msg)
+                            need_merged = True
                         elif isinstance(msg, MapChunk) and item.payload is not None:
                             try:
                                 agent.on_merged_delta(decode_delta(item.payload))
@@ -525,7 +576,7 @@ def run_agent(
                         log.warning("%s: %s", robot_id, e)
                 while waiting and time.monotonic() - waiting[0][0] > SCAN_WAIT_S:
                     _process_scan(bus, me, agent, waiting.pop(0)[1], sink, state_dir)
-                if need_merged:
+                if need_merged and agent.in_shared_frame:
                     got = bus.fetch_map(keys.merged_map, timeout_s=2.0)
                     if got is not None:
                         try:

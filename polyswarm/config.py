@@ -149,6 +149,10 @@ class SimConfig:
     robot: RobotConfig = field(default_factory=RobotConfig)
     lidar: LidarConfig = field(default_factory=LidarConfig)
     odometry_noise: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)
+    # where the simulated robots really start (world frame: x m, y m, theta rad), one per
+    # [[robots]] entry; empty: at their [[robots]] starts. For robots whose start poses
+    # the swarm is not told (``launch --unknown-start``): only the simulator knows these
+    start_poses: tuple[tuple[float, float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -355,10 +359,14 @@ class ExploreConfig:
 
 @dataclass(frozen=True)
 class RobotEntry:
-    """A robot of the swarm and its start pose in the shared map frame (x, y, theta)."""
+    """A robot of the swarm and its start pose in the shared map frame (x m, y m,
+    theta rad). Left out: not known. The robot then maps in a frame of its own until the
+    coordinator finds where that frame lies by matching its map with the merged map
+    (``polyswarm.mapmatch``); when no robot's start is given, the first robot's start
+    is the shared frame's origin (``known_starts``)."""
 
     id: str = "r1"
-    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    start: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -514,8 +522,17 @@ def config_to_dict(cfg: Any) -> dict:
             out[f.name] = config_to_dict(v)
         elif isinstance(v, tuple):
             out[f.name] = [config_to_dict(x) if dataclasses.is_dataclass(x) else x for x in v]
-        else:
+        elif v is not None:  # None: left out (TOML has no null)
             out[f.name] = v
+    return out
+
+
+def known_starts(robots: tuple[RobotEntry, ...]) -> dict[str, tuple[float, float, float] | None]:
+    """Each robot's start in the shared frame, None where it is not known; when no start
+    is known, the first robot's is the origin (its frame is the shared frame)."""
+    out = {r.id: r.start for r in robots}
+    if robots and all(s is None for s in out.values()):
+        out[robots[0].id] = (0.0, 0.0, 0.0)
     return out
 
 
@@ -637,6 +654,12 @@ def validate(cfg: Config) -> None:
     for r in cfg.robots:
         if not r.id or not all(ch.isalnum() or ch in "_-" for ch in r.id) or len(r.id) > 32:
             raise ConfigError(f"robots: id {r.id!r} must be 1-32 letters, digits, '_' or '-'")
+        if r.start is None:
+            continue
         x, y, th = r.start
         if not (abs(x) <= 1e6 and abs(y) <= 1e6 and abs(th) <= TWO_PI):
             raise ConfigError(f"robots: start of {r.id} must be finite metres and radians")
+    if cfg.sim.start_poses and len(cfg.sim.start_poses) != len(cfg.robots):
+        raise ConfigError(
+            f"sim.start_poses: {len(cfg.sim.start_poses)} poses for {len(cfg.robots)} robots"
+        )

@@ -63,6 +63,10 @@ MAX_CONFLICT_SHARE = 0.01  # of the walls in the shared space, at most this shar
 # the other's clear space (a 5 m shift along the office's row of rooms: 4-8 %)
 VERIFY_CONFLICT_WEIGHT = 10.0  # a wall in the other's clear space undoes ten agreeing points
 MAX_RIVAL_RATIO = 0.85  # another pose (> RIVAL_APART) scoring this share of the best: ambiguous
+# ... and the best must explain this much more wall than any other pose: in a row of
+# identical rooms a small map fits several places almost equally (office, 3 of 3 wrong
+# poses seen had a margin under 3.5 m; the right ones grew past 6 m as the maps grew)
+MIN_MARGIN_WALL_M = 6.0
 RIVAL_APART_M = 1.0
 RIVAL_APART_RAD = math.radians(10.0)
 
@@ -85,6 +89,7 @@ class MapMatch:
     rival_ratio: float  # the best other pose's score / this one's
     score: float
     candidates: int = field(default=0)
+    margin_wall_m: float = 0.0  # wall this pose explains beyond the best other pose
 
     def summary(self) -> str:
         x, y, th = self.pose
@@ -92,7 +97,8 @@ class MapMatch:
             f"pose ({x:.2f} m, {y:.2f} m, {math.degrees(th):.1f} deg), overlap "
             f"{self.overlap_m2:.1f} m2, agreeing wall {self.agreeing_wall_m:.1f} m "
             f"({self.agreeing_share:.0%}), conflicts {self.conflict_share:.1%}, rival "
-            f"{self.rival_ratio:.2f}" + ("" if self.accepted else f": {self.reason}")
+            f"{self.rival_ratio:.2f}, margin {self.margin_wall_m:.1f} m"
+            + ("" if self.accepted else f": {self.reason}")
         )
 
 
@@ -309,7 +315,7 @@ def _evidence(a: _MapView, b: _MapView, pose: np.ndarray) -> dict:
     }
 
 
-def _verdict(ev: dict, rival: float) -> str:
+def _verdict(ev: dict, rival: float, margin_m: float) -> str:
     if ev["overlap_m2"] < MIN_OVERLAP_M2:
         return f"overlap {ev['overlap_m2']:.1f} m2 < {MIN_OVERLAP_M2} m2"
     if ev["agreeing_wall_m"] < MIN_AGREEING_WALL_M:
@@ -320,6 +326,8 @@ def _verdict(ev: dict, rival: float) -> str:
         return f"{ev['conflict_share']:.1%} of the walls stand in the other's clear space"
     if rival > MAX_RIVAL_RATIO:
         return f"ambiguous: another pose scores {rival:.0%} of the best"
+    if margin_m < MIN_MARGIN_WALL_M:
+        return f"ambiguous: another pose explains all but {margin_m:.1f} m of the wall"
     return ""
 
 
@@ -339,9 +347,19 @@ def match_maps(a: GridPolyMap, b: GridPolyMap) -> MapMatch:
     rivals = [
         r[1]["score"] for r in refined[1:] if not _close(r[0], best, RIVAL_APART_M, RIVAL_APART_RAD)
     ]
-    rival = max(rivals, default=0.0) / max(ev["score"], 1e-9)
-    reason = _verdict(ev, rival)
-    return MapMatch(best, reason == "", reason, rival_ratio=rival, candidates=len(cands), **ev)
+    rival_score = max(rivals, default=0.0)
+    rival = rival_score / max(ev["score"], 1e-9)
+    margin_m = 0.5 * WALL_STEP_M * (ev["score"] - max(rival_score, 0.0))  # as agreeing wall
+    reason = _verdict(ev, rival, margin_m)
+    return MapMatch(
+        best,
+        reason == "",
+        reason,
+        rival_ratio=rival,
+        candidates=len(cands),
+        margin_wall_m=margin_m,
+        **ev,
+    )
 
 
 def transform_map(pmap: GridPolyMap, pose) -> GridPolyMap:

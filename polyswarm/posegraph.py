@@ -24,7 +24,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from polyswarm.errors import PolyswarmError
-from polyswarm.se2 import relative_many, wrap
+from polyswarm.se2 import compose, relative_many, wrap
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +63,11 @@ class PoseGraph:
     @property
     def poses(self) -> np.ndarray:
         return np.array(self._poses).reshape(-1, 3)
+
+    def move_all(self, frame) -> None:
+        """Every node moved by ``frame`` (x m, y m, theta rad): the graph now lives in the
+        frame in which its old frame lies at ``frame``. Edges are relative: unchanged."""
+        self._poses = [compose(frame, p) for p in self._poses]
 
     def add_node(self, pose) -> int:
         self._poses.append(np.array(pose, dtype=float))

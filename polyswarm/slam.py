@@ -37,6 +37,7 @@ from polyswarm.follow import Atlas, CorrectionOp, correct, pose_of
 from polyswarm.icp import IcpResult, PointToVectorIcp
 from polyswarm.keyframe import keyframe_polygon
 from polyswarm.loopsearch import correlative_search
+from polyswarm.mapmatch import transform_map
 from polyswarm.polymap import (
     UNITS_PER_M,
     GridPolyMap,
@@ -86,6 +87,7 @@ class SlamStep:
     icp: IcpResult | None = None
     refined: str = ""  # "refined", "projected" or "raw" on keyframes
     timings_ms: dict[str, float] = field(default_factory=dict)
+    anchored: bool = False  # this step moved the SLAM into the frame ``anchor`` gave
 
 
 class KeyframeSelector:
@@ -175,6 +177,9 @@ class PolySlam:
         self._follows = cfg.map_follows_graph
         self._correction: CorrectionOp | None = None
         self.corrections: list[dict] = []
+        self._anchor: np.ndarray | None = None  # a frame to move into at the next scan
+        self._anchor_base: int | None = None  # the map's version before that move
+        self.anchors = 0  # frames moved into
 
     def resume(self, pmap: GridPolyMap, pose, odom=None) -> None:
         """Continue on a persisted map from the last known pose (an agent restarted): the
@@ -203,6 +208,32 @@ class PolySlam:
         self.selector.last = None
         self._keyframe_requested = True
 
+    def anchor(self, frame) -> None:
+        """Move into another frame at the next scan: ``frame`` (x m, y m, theta rad) is
+        where this SLAM's frame lies in it (the shared map frame, found by the
+        coordinator: ``agents.anchoring``). The pose graph, the keyframes and the pose
+        move by it; the map follows as a correction of every keyframe (a resumed map,
+        which does not follow the graph, as all its cells), sent with that scan, which
+        is made a keyframe."""
+        self._anchor = np.array(frame, dtype=float)
+
+    def _apply_anchor(self) -> None:
+        frame, self._anchor = self._anchor, None
+        self._anchor_base = self.map.version
+        self.graph.move_all(frame)
+        if self.store:
+            self.store.set_poses(np.array([compose(frame, k.pose) for k in self.store.keyframes]))
+        self.pose = compose(frame, self.pose)
+        if self._kf_pose is not None:
+            self._kf_pose = compose(frame, self._kf_pose)
+        self._keyframe_requested = True
+        self.anchors += 1
+        if self._follows:
+            self._follow()
+            return
+        moved = transform_map(self.map, frame)
+        self.map, _ = self.map.with_cells_of(moved, set(self.map.cells) | set(moved.cells))
+
     def request_keyframe(self) -> None:
         """Make the next scan a keyframe (a robot that stopped to look at something)."""
         self._keyframe_requested = True
@@ -213,6 +244,8 @@ class PolySlam:
         odom = np.array(odom, dtype=float)
         if not np.isfinite(odom).all():
             raise PolyswarmError(f"odometry pose is not finite: {odom}")
+        if self._anchor is not None:
+            self._apply_anchor()
         # 3. pre-alignment: last keyframe pose plus the odometry increment since then
         pred = (
             self.pose
@@ -243,6 +276,9 @@ class PolySlam:
             return SlamStep(pred, False)
         # 4. point-to-vector ICP against the obstacle vectors near the robot
         start_version = self.map.version
+        anchor_base, self._anchor_base = self._anchor_base, None
+        if anchor_base is not None:  # moved into another frame: the delta starts before
+            start_version = anchor_base
         res = None
         pose = pred
         valid = points.xy[points.valid]
@@ -253,7 +289,8 @@ class PolySlam:
         t["icp"] = time.perf_counter()
         # 4b. pose graph: this keyframe's node, its tracking edge, and a loop edge when
         # the scan also matches an old part of the map
-        pose = self._add_to_graph(pose, res, valid, points.origin)
+        # (not in the step that moved into another frame: one correction per step)
+        pose = self._add_to_graph(pose, res, valid, points.origin, anchor_base is None)
         t["loop"] = time.perf_counter()
         # 5. keyframe polygon, closed through the sensor centre
         kf = keyframe_polygon(
@@ -268,7 +305,7 @@ class PolySlam:
         # (after a correction, the delta starts before it)
         base, op = self.map.version, None
         correction, self._correction = self._correction, None
-        if correction is not None:
+        if correction is not None or anchor_base is not None:
             base = start_version
         news = trim_keyframe(kf, self.map, self.merge_options) if self.cfg.trim_merges else kf
         snapped = snap_polygon(news, self._quantum_u) if self._quantum_u else None
@@ -295,6 +332,8 @@ class PolySlam:
         except PolyswarmError as e:  # never silently: counted, logged, pose still tracked
             self.rejected_keyframes += 1
             log.warning("keyframe %d not merged: %s", self.keyframes, e)
+        if anchor_base is not None and correction is None:
+            op = None  # a map moved as cells: receivers take the cells, not a replay
         t["merge"] = time.perf_counter()
         self.store.add(pose, kf)
         if self.keep_trajectory:
@@ -312,7 +351,9 @@ class PolySlam:
             ms[name] = (t[name] - prev) * 1e3
             prev = t[name]
         ms["total"] = (t["merge"] - t["start"]) * 1e3
-        return SlamStep(self.pose.copy(), True, delta, op, correction, res, how, ms)
+        return SlamStep(
+            self.pose.copy(), True, delta, op, correction, res, how, ms, anchor_base is not None
+        )
 
     def _sees_new_space(self, points, pose) -> bool:
         """Do ``keyframe_novelty`` of the scan's beams end (pulled back by
@@ -353,8 +394,11 @@ class PolySlam:
         )
         return s, e
 
-    def _add_to_graph(self, pose, res: IcpResult | None, valid, origin) -> np.ndarray:
-        """Add the keyframe to the pose graph; its pose after any loop correction."""
+    def _add_to_graph(
+        self, pose, res: IcpResult | None, valid, origin, loops: bool = True
+    ) -> np.ndarray:
+        """Add the keyframe to the pose graph; its pose after any loop correction
+        (``loops``: look for one)."""
         lc = self.cfg.loop_closure
         node = self.graph.add_node(pose)
         if node == 0:
@@ -380,7 +424,7 @@ class PolySlam:
             weak_sigma_m=lc.odometry_sigma_m + ODOMETRY_SIGMA_PER_M * float(np.hypot(*z[:2])),
         )
         self._travel_since_loop_m += float(np.hypot(*z[:2]))
-        if not lc.enabled or len(valid) == 0:
+        if not lc.enabled or not loops or len(valid) == 0:
             return pose
         # how far tracking may have drifted since the last loop: the wide search's window
         window = lc.search_window(self._travel_since_loop_m)

@@ -89,6 +89,13 @@ class SwarmKeys:
     def assignment(self, robot_id: str) -> str:
         return f"{self.prefix}/coordinator/assignment/{check_name(robot_id, 'robot id')}"
 
+    def anchor(self, robot_id: str) -> str:
+        return f"{self.prefix}/coordinator/anchor/{check_name(robot_id, 'robot id')}"
+
+    @property
+    def all_anchors(self) -> str:
+        return f"{self.prefix}/coordinator/anchor/*"
+
     @property
     def merged_delta(self) -> str:
         return f"{self.prefix}/coordinator/map/delta"

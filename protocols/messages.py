@@ -259,7 +259,9 @@ class CmdVel(Message):
 
 @dataclass(frozen=True)
 class Pose(Message):
-    """A robot's SLAM pose estimate in the swarm's map frame."""
+    """A robot's SLAM pose estimate in the swarm's map frame (``frame`` 0: a robot whose
+    start pose nobody gave is in a frame of its own until the ``anchor`` numbered
+    ``frame`` has put it into the swarm's)."""
 
     TYPE: ClassVar[str] = "pose"
     x: float
@@ -267,11 +269,14 @@ class Pose(Message):
     theta: float
     map_version: int = 0
     blocked_by: str = ""  # a robot standing in this one's way (it should give way)
+    frame: int = 0  # the last anchor applied (0: none)
 
     def body(self) -> dict:
         out = {"x": self.x, "y": self.y, "th": self.theta, "ver": self.map_version}
         if self.blocked_by:
             out["wait"] = self.blocked_by
+        if self.frame:  # absent when 0 (and in older senders' messages)
+            out["frame"] = self.frame
         return out
 
     @classmethod
@@ -285,6 +290,7 @@ class Pose(Message):
             _num(b.get("th"), "th", -1e3, 1e3),
             _int(b.get("ver", 0), "ver", 0),
             wait,
+            _int(b.get("frame", 0), "frame", 0),
         )
 
 
@@ -360,6 +366,33 @@ class Assignment(Message):
             _points(b.get("frontier", ()), "frontier"),
             _num(b.get("cost", 0.0), "cost", 0.0),
             _int(b.get("ver", 0), "ver", 0),
+        )
+
+
+@dataclass(frozen=True)
+class Anchor(Message):
+    """The coordinator to a robot whose start pose nobody gave: where its frame lies in
+    the swarm's map frame, found by matching its map with the merged map. The robot
+    moves its pose graph, keyframes and pose by it (its map follows as a correction)
+    and from then on speaks in the swarm's frame. ``frame`` numbers the anchors sent to
+    this robot (from 1): one already applied is ignored, so it can be sent again."""
+
+    TYPE: ClassVar[str] = "anchor"
+    frame: int
+    x: float
+    y: float
+    theta: float
+
+    def body(self) -> dict:
+        return {"frame": self.frame, "x": self.x, "y": self.y, "th": self.theta}
+
+    @classmethod
+    def from_body(cls, b: dict) -> Anchor:
+        return cls(
+            _int(b.get("frame"), "frame", 1),
+            _num(b.get("x"), "x"),
+            _num(b.get("y"), "y"),
+            _num(b.get("th"), "th", -1e3, 1e3),
         )
 
 
@@ -535,6 +568,7 @@ TYPES: dict[str, type[Message]] = {
         Pose,
         RobotStatus,
         Assignment,
+        Anchor,
         CoordinatorStatus,
         Clock,
         Truth,

@@ -42,8 +42,8 @@ def _typed(region: shapely.Geometry, walls: shapely.Geometry) -> list[TypedPolyg
     """Typed polygons of ``region``: edges on ``walls`` are obstacles, others frontiers."""
     out = []
     polys = [g for g in getattr(region, "geoms", [region]) if g.geom_type == "Polygon"]
-    for p in polys:
-        p = shapely.geometry.polygon.orient(p, 1.0)  # shell counter-clockwise, holes clockwise
+    for piece in polys:
+        p = shapely.geometry.polygon.orient(piece, 1.0)  # shell ccw, holes clockwise
         rings = []
         for ring in [p.exterior, *p.interiors]:
             xy = np.asarray(ring.coords)[:-1]

@@ -234,3 +234,16 @@ def test_golden_messages_decode_and_the_encoder_reproduces_them():
         body = {k: (v.hex() if isinstance(v, bytes) else v) for k, v in msg.body().items()}
         assert json.loads(json.dumps(body)) == g["body"]
         assert encode(msgs[name], "r1", 7, 12.5).hex() == g["hex"]
+
+
+def test_a_pose_names_its_frame_only_once_anchored():
+    from protocols.messages import Anchor, Pose
+
+    plain = Pose(1.0, 2.0, 0.5, 3)
+    assert "frame" not in plain.body()  # as older senders wrote it
+    _, back = decode(encode(Pose(1.0, 2.0, 0.5, 3, "", 2), "r1", 0, 0.0), Pose)
+    assert back.frame == 2
+    _, a = decode(encode(Anchor(1, 3.0, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)
+    assert (a.frame, a.x, a.y, a.theta) == (1, 3.0, -4.0, 1.5)
+    with pytest.raises(ProtocolError):  # anchors count from 1
+        decode(encode(Anchor(0, 3.0, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)

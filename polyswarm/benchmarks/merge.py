@@ -113,8 +113,14 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray) -> list[dict]:
         row["ours_s"] = time.perf_counter() - t0
         accepted = m is not None and m.accepted
         row["ours"] = {"accepted": accepted, **_score(m.pose if accepted else None, truth)}
-        if m is not None:
+        if m is not None:  # every figure, so thresholds can be studied on the result
             row["ours"]["evidence"] = m.summary()
+            row["ours"]["pose"] = [float(v) for v in m.pose]
+            row["ours"]["found"] = _score(m.pose, truth)  # the best pose, accepted or not
+            for name in ("overlap_m2", "agreeing_wall_m", "agreeing_share", "conflict_share"):
+                row["ours"][name] = getattr(m, name)
+            row["ours"]["rival_ratio"] = m.rival_ratio
+            row["ours"]["margin_wall_m"] = m.margin_wall_m
         committed = frames.add(m) if m is not None else frames.pose
         row["committed"] = {"accepted": committed is not None, **_score(committed, truth)}
         for feat in Features:
@@ -165,36 +171,42 @@ def _delay(pair_rows: list[dict], pick: Callable[[dict], dict | None]) -> float 
     return None
 
 
+def _one_run(profile: str, world: str, seed: int, robots: int) -> list[dict]:
+    """One exploration at scattered starts; every robot's map against robot 1's."""
+    from polyswarm.config import Config, with_profile
+    from polyswarm.se2 import compose, inverse
+
+    cfg = with_profile(Config(), profile)
+    moments, starts = _snapshots(world, seed, robots, cfg)
+    pairs = []
+    for k in range(1, robots):
+        truth = compose(inverse(np.asarray(starts[0])), np.asarray(starts[k]))
+        rows = _pair_moments(moments, k, truth)
+        pairs.append(
+            {"profile": profile, "world": world, "seed": seed, "robot": f"r{k + 1}", "rows": rows}
+        )
+    return pairs
+
+
 def run(
     worlds: tuple[str, ...],
     seeds: int,
     robots: int = 3,
     profiles: tuple[str, ...] = ("thesis",),
     progress: Callable[[str], None] | None = None,
+    jobs: int = 1,
 ) -> dict:
-    from polyswarm.config import Config, with_profile
-    from polyswarm.se2 import compose, inverse
+    """``jobs`` runs side by side in worker processes (match times then share the
+    processor: compare them only between results made with one job)."""
+    from concurrent.futures import ProcessPoolExecutor
 
+    specs = [(p, w, s, robots) for p in profiles for w in worlds for s in range(seeds)]
     pairs = []
-    for profile, world, seed in ((p, w, s) for p in profiles for w in worlds for s in range(seeds)):
-        cfg = with_profile(Config(), profile)
-        if progress:
-            progress(f"{profile}, {world} seed {seed}: exploring")
-        moments, starts = _snapshots(world, seed, robots, cfg)
-        for k in range(1, robots):
+    with ProcessPoolExecutor(jobs) as pool:
+        for k, got in enumerate(pool.map(_one_run, *zip(*specs, strict=True))):
+            pairs += got
             if progress:
-                progress(f"{profile}, {world} seed {seed}: matching r{k + 1} to r1")
-            truth = compose(inverse(np.asarray(starts[0])), np.asarray(starts[k]))
-            rows = _pair_moments(moments, k, truth)
-            pairs.append(
-                {
-                    "profile": profile,
-                    "world": world,
-                    "seed": seed,
-                    "robot": f"r{k + 1}",
-                    "rows": rows,
-                }
-            )
+                progress(f"{k + 1} of {len(specs)} runs done")
     all_rows = [r for p in pairs for r in p["rows"]]
     methods: dict[str, Callable[[dict], dict | None]] = {
         "polyswarm_match": lambda r: r["ours"],
@@ -229,6 +241,7 @@ def run(
         "profiles": list(profiles),
         "worlds": list(worlds),
         "seeds": seeds,
+        "jobs": jobs,
         "robots": robots,
         "snapshot_s": SNAPSHOT_S,
         "methods": summary,

@@ -770,6 +770,7 @@ def bench_merge(
     seeds: int = typer.Option(5, min=1, help="Seeds per world (starts, headings, noise)."),
     robots: int = typer.Option(3, min=2, help="Robots per run."),
     profile: str = typer.Option("thesis", help="Robot profiles, comma separated."),
+    jobs: int = typer.Option(1, min=1, help="Runs side by side (worker processes)."),
 ) -> None:
     """Maps of robots with unknown starts: polyswarm's map matching against the peer
     method (multirobot_map_merge's feature-based grid merging) at the same moments."""
@@ -784,6 +785,7 @@ def bench_merge(
             robots,
             tuple(p for p in profile.split(",") if p),
             lambda what: status.update(f"merge: {what}"),
+            jobs,
         )
     _save(save, res)
     if as_json:

@@ -67,7 +67,7 @@ def agent_cmd(
 
     from agents.robot import run_agent
     from agents.session import SessionSpec, stop_on_signals
-    from polyswarm.config import load_config
+    from polyswarm.config import known_starts, load_config
     from protocols.keys import SwarmKeys, check_name
 
     check_name(robot_id, "robot id")
@@ -118,21 +118,38 @@ def agent_cmd(
         if start is None:
             start = ",".join(str(v) for v in player.start_pose)
     pose = _pose(start)
+    frame_known = True
     if pose is None:
-        entry = next((r for r in cfg.robots if r.id == robot_id), None)
-        if entry is None:
+        starts = known_starts(cfg.robots)
+        if robot_id not in starts:
             logging.getLogger("polyswarm").warning(
                 "no start pose for %s (no --start, not in [[robots]]): using (0, 0, 0)", robot_id
             )
             pose = (0.0, 0.0, 0.0)
+        elif starts[robot_id] is None:
+            logging.getLogger("polyswarm").info(
+                "%s: start pose not given: mapping in its own frame until the coordinator "
+                "finds it in the shared map",
+                robot_id,
+            )
+            pose, frame_known = (0.0, 0.0, 0.0), False
         else:
-            pose = tuple(entry.start)
+            pose = tuple(starts[robot_id])
     zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
     if listen:
         spec = SessionSpec.router(listen, zconf)
     else:
         spec = SessionSpec.client(endpoint or cfg.comms.endpoint, zconf)
-    agent = run_agent(robot_id, cfg, pose, spec, stop=stop, duration_s=duration, attach=attach)
+    agent = run_agent(
+        robot_id,
+        cfg,
+        pose,
+        spec,
+        stop=stop,
+        duration_s=duration,
+        attach=attach,
+        frame_known=frame_known,
+    )
     if out is not None:
         from polyswarm.io.export import export_map
         from protocols.files import write_polymap
@@ -270,6 +287,13 @@ def launch_cmd(
         max=65535,
         help="Also serve the live view in a browser on this port of 127.0.0.1 (polyswarm view).",
     ),
+    unknown_start: bool = typer.Option(
+        False,
+        "--unknown-start",
+        help="Place the robots at scattered random starts (seeded, 10 m apart where the world "
+        "allows, random headings) and tell nobody: the coordinator finds each robot's frame by "
+        "matching its map with the merged map (the first robot's start is the map's origin).",
+    ),
 ) -> None:
     """Explore a simulated world with N robots: coordinator, sim and agents as processes.
 
@@ -307,6 +331,7 @@ def launch_cmd(
         link_faults=link_faults,
         view_port=view_port,
         restart=restart,
+        unknown_start=unknown_start,
     )
     console = Console(stderr=True)
     if view_port is not None:
@@ -362,6 +387,13 @@ def launch_cmd(
         ("restarted processes", ", ".join(f"{k} x{n}" for k, n in m["restarts"].items()) or "none"),
     ):
         table.add_row(k, v)
+    for rid, a in m["anchors"].items():  # robots whose starts nobody gave
+        table.add_row(
+            f"{rid}'s frame found (simulated s, error)",
+            f"{a['t_s']:.0f} s, {a['err_m']:.3f} m, {a['err_deg']:.2f} deg",
+        )
+    if m["unanchored"]:
+        table.add_row("frames never found", ", ".join(m["unanchored"]))
     Console().print(table)
     typer.echo(f"wrote {res.out}", err=True)
 

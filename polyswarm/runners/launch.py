@@ -30,9 +30,17 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+import shapely.affinity
 
 from agents.session import Bus, SessionSpec, open_session
-from polyswarm.config import Config, RobotEntry, config_to_dict, save_config, with_overrides
+from polyswarm.config import (
+    Config,
+    RobotEntry,
+    config_to_dict,
+    known_starts,
+    save_config,
+    with_overrides,
+)
 from polyswarm.errors import ConfigError, DecodeError, MapError, PolyswarmError
 from polyswarm.evaluation import (
     coverage_tolerance,
@@ -41,10 +49,13 @@ from polyswarm.evaluation import (
     reachable_free,
     time_to_coverage,
 )
+from polyswarm.mapmatch import frame_error
 from polyswarm.polymap import GridPolyMap, MapDelta, VectorType
+from polyswarm.se2 import compose, inverse, transform_points
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta, decode_map
 from protocols.messages import (
+    Anchor,
     Clock,
     CoordinatorStatus,
     MapChunk,
@@ -130,6 +141,9 @@ class LaunchOptions:
     robots_nice: int = 5
     view_port: int | None = None  # also run ``polyswarm view`` serving on this port
     restart: bool = True  # restart children that exit unexpectedly (False: stop the mission)
+    # robots at scattered random starts (seeded, 10 m apart where the world allows, random
+    # headings) that nobody is told: only the simulator and the metrics know them
+    unknown_start: bool = False
 
 
 @dataclass
@@ -162,6 +176,14 @@ def _clip(geom, bounds):
     return shapely.intersection(geom, shapely.box(*bounds))
 
 
+def _moved(geom, pose):
+    """``geom`` moved rigidly by ``pose`` (x m, y m, theta rad)."""
+    if not np.any(pose):
+        return geom
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return shapely.affinity.affine_transform(geom, [c, -s, s, c, pose[0], pose[1]])
+
+
 class Observer:
     """Follows the exploration from the outside: coverage, states, bytes, trajectories."""
 
@@ -173,10 +195,23 @@ class Observer:
         lid = cfg.sim.lidar
         res = world.grid.resolution if world.grid is not None else 0.0
         self.tolerance_m = coverage_tolerance(lid.noise_sigma_m, lid.noise_sigma_per_m, res)
-        starts = [r.start for r in cfg.robots] or [world.start]
+        starts = list(cfg.sim.start_poses) or [r.start for r in cfg.robots] or [world.start]
         self.truth_free = reachable_free(
             world.free, cfg.sim.robot.radius_m, starts, self.tolerance_m
         )
+        # robots whose starts were not given map in the first robot's frame: the truth is
+        # taken into it (the world as the map sees it)
+        # robots in frames of their own until anchored: their poses are not compared yet
+        self.own_frames = {rid for rid, st in known_starts(cfg.robots).items() if st is None}
+        self.true_starts = [np.asarray(p, dtype=float) for p in cfg.sim.start_poses]
+        self.anchors: dict[str, dict] = {}  # robot -> when its frame was placed, how well
+        self.to_map = np.zeros(3)
+        if cfg.sim.start_poses and any(r.start is None for r in cfg.robots):
+            self.to_map = inverse(np.asarray(starts[0], dtype=float))
+        self.truth_free = _moved(self.truth_free, self.to_map)
+        self.world_free = _moved(world.free, self.to_map)
+        ws, we = world.wall_segments
+        self.walls = (transform_points(self.to_map, ws), transform_points(self.to_map, we))
         self.truth_area = float(self.truth_free.area)
         shapely.prepare(self.truth_free)
         self.merged = GridPolyMap(cfg.map.cell_size_m)
@@ -217,14 +252,24 @@ class Observer:
         return self.covered_area() / max(self.truth_area, 1e-9)
 
     def iou(self) -> float:
-        return map_iou(self.merged.explored_region(), self.world.free)
+        return map_iou(self.merged.explored_region(), self.world_free)
 
     def phantom_m(self) -> float:
         st, en, _ = self.merged.vectors([VectorType.OBSTACLE])
-        return phantom_obstacles(st, en, *self.world.wall_segments, PHANTOM_M)
+        return phantom_obstacles(st, en, *self.walls, PHANTOM_M)
 
     def on_merged(self, delta: MapDelta) -> None:
         self.merged = self.merged.apply_delta(delta)
+
+    def on_anchor(self, rid: str, a: Anchor) -> None:
+        """The coordinator placed robot ``rid``'s frame: scored against where it really
+        started (the first anchor of each robot is kept; resends repeat it)."""
+        k = next((i for i, r in enumerate(self.robots) if r == rid), None)
+        if k is None or rid in self.anchors or k >= len(self.true_starts):
+            return
+        truth = compose(self.to_map, self.true_starts[k])
+        err_m, err_rad = frame_error((a.x, a.y, a.theta), truth)
+        self.anchors[rid] = {"t_s": self.sim_t, "err_m": err_m, "err_deg": math.degrees(err_rad)}
 
     def sample(self) -> None:
         if not self.coverage or self.sim_t - self.coverage[-1][0] >= COVERAGE_EVERY_S:
@@ -233,14 +278,17 @@ class Observer:
     def handle(self, keys: SwarmKeys, item) -> None:
         msg = item.msg
         rid = keys.robot_of(item.key)
-        if isinstance(msg, Clock):
+        if isinstance(msg, Anchor):
+            self.on_anchor(item.key.rsplit("/", 1)[-1], msg)
+        elif isinstance(msg, Clock):
             self.sim_t, self.sim_speed = msg.t_s, msg.speed
         elif isinstance(msg, Truth):
             self.collisions = (msg.wall_collisions, msg.robot_collisions)
-            for name, p in msg.poses.items():
+            for name, true_pose in msg.poses.items():
                 view = self.robots.get(name)
                 if view is None:
                     continue
+                p = compose(self.to_map, true_pose)
                 if view.truth:
                     view.path_length_m += math.hypot(
                         p[0] - view.truth[-1][1], p[1] - view.truth[-1][2]
@@ -266,7 +314,7 @@ class Observer:
             if isinstance(msg, RobotStatus):
                 view.state, view.target = str(msg.state), msg.target
                 view.bytes_sent, view.keyframes = msg.bytes_sent, msg.keyframes
-            elif isinstance(msg, Pose):
+            elif isinstance(msg, Pose) and (rid not in self.own_frames or msg.frame > 0):
                 view.estimate.append((item.stamp_s, msg.x, msg.y, msg.theta))
             elif isinstance(msg, MapChunk) and item.payload is not None:
                 view.map_delta_bytes += len(item.payload)
@@ -316,6 +364,10 @@ class Observer:
             "robot_map_fetches": int(self.losses[1] + self._losses_now[1]),
             "robot_map_fetch_bytes": int(self.losses[2] + self._losses_now[2]),
             "wall_time_s": wall_s,
+            # robots whose starts nobody gave: when and how well their frames were placed,
+            # and those never placed (their maps never joined the merged map)
+            "anchors": self.anchors,
+            "unanchored": sorted((self.own_frames & set(self.robots)) - set(self.anchors)),
             "coordinator_rss_mb_over_time": [
                 [round(t, 1), round(m, 1)] for t, m in self.coordinator_rss_mb
             ],
@@ -441,11 +493,14 @@ def _stop_children(children: list[Child]) -> dict[str, int | None]:
 
 def prepare(opts: LaunchOptions):
     """World, effective config (robot ids and start poses), run folder."""
-    from sim import load_world, spread_start_poses
+    from sim import load_world, scattered_start_poses, spread_start_poses
 
     world = load_world(opts.world, seed=opts.seed)
     cfg = opts.config
-    starts = spread_start_poses(world, opts.robots, cfg.sim.robot.radius_m)
+    if opts.unknown_start:
+        starts = scattered_start_poses(world, opts.robots, cfg.sim.robot.radius_m, opts.seed)
+    else:
+        starts = spread_start_poses(world, opts.robots, cfg.sim.robot.radius_m)
     port = free_port()
     cfg = with_overrides(
         cfg,
@@ -455,8 +510,12 @@ def prepare(opts: LaunchOptions):
             "comms": {"endpoint": f"tcp/127.0.0.1:{port}"},
         },
     )
-    robots = tuple(RobotEntry(f"r{k + 1}", tuple(map(float, p))) for k, p in enumerate(starts))
-    cfg = _with_robots(cfg, robots)
+    starts = [tuple(map(float, p)) for p in starts]
+    if opts.unknown_start:  # the swarm is told nothing; the simulator puts them there
+        cfg = _with_robots(cfg, tuple(RobotEntry(f"r{k + 1}") for k in range(len(starts))))
+        cfg = with_overrides(cfg, {"sim": {"start_poses": [list(p) for p in starts]}})
+    else:
+        cfg = _with_robots(cfg, tuple(RobotEntry(f"r{k + 1}", p) for k, p in enumerate(starts)))
     out = opts.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     if not cfg.persist.dir:  # agents and coordinator keep their maps in the run folder
@@ -532,6 +591,7 @@ def launch(
                 bus.subscribe(keys.all_robots("status"), RobotStatus)
                 bus.subscribe(keys.all_robots("pose"), Pose)
                 bus.subscribe(keys.all_robots("map/delta"), MapChunk)
+                bus.subscribe(keys.all_anchors, Anchor)
                 error = _watch(bus, keys, obs, opts, children, stop, progress, t0, sup)
                 if error != "interrupted":
                     _final_sync(bus, keys, obs)

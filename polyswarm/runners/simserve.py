@@ -60,7 +60,11 @@ def serve(
     speed = cfg.sim.speed if speed is None else speed
     keys = SwarmKeys(cfg.comms.swarm)
     ids = [r.id for r in cfg.robots]
-    starts = [tuple(r.start) for r in cfg.robots] if cfg.robots else None
+    starts = (
+        [tuple(p) for p in cfg.sim.start_poses]
+        or [tuple(r.start or (0.0, 0.0, 0.0)) for r in cfg.robots]
+        or None
+    )
     n = max(1, len(ids))
     saved = Path(cfg.persist.dir) / STATE_FILE if cfg.persist.dir else None
     with Simulation(world, cfg.sim, n, start_poses=starts, gui=gui) as sim:

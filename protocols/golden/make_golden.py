@@ -93,6 +93,7 @@ def describe_polygons(polys) -> list:
 def golden_messages() -> list[tuple[str, object]]:
     """One message of every type (sender "r1", seq 7, stamp 12.5 s)."""
     from protocols.messages import (
+        Anchor,
         Assignment,
         AssignmentKind,
         Clock,
@@ -119,6 +120,7 @@ def golden_messages() -> list[tuple[str, object]]:
             "assignment",
             Assignment(AssignmentKind.EXPLORE, 5, (1.0, 2.0), ((0.0, 0.0), (1.0, 0.0)), 4.5, 11),
         ),
+        ("anchor", Anchor(1, 12.5, -3.25, 2.0)),
         (
             "coordinator-status",
             CoordinatorStatus(MissionState.EXPLORING, ("r1", "r2"), 3, 11, 42.0, 12.5, 1000, 9.25),

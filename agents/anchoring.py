@@ -1,0 +1,161 @@
+"""Robots whose start poses nobody gave: exploring alone until their frame is found.
+
+A robot without a start pose in ``[[robots]]`` maps in a frame of its own (its start).
+Until the coordinator knows where that frame lies in the shared map frame:
+
+* it explores its own map: a coordinator of its own (``solo``) takes its map updates,
+  poses and status, and assigns it frontiers of its map, in its frame. Nothing of it
+  enters the merged map, and the other robots are not planned around it;
+* every ``MATCH_PERIOD_S`` its map is matched with the merged map
+  (``polyswarm.mapmatch.match_maps``, in a worker thread: a match takes 0.3-2.5 s), and
+  every match, accepted or not, is logged with its evidence;
+* once successive matches agree (``FrameEstimate``), the robot is sent an ``anchor``:
+  the pose of its frame in the shared frame. It moves its pose graph, keyframes and pose
+  by it; its map follows as a correction of every keyframe, which its solo coordinator
+  replays like any other;
+* its first pose that names the anchor hands it over: the main coordinator takes its
+  map copy (now in the shared frame), merges it, and coordinates it with the others.
+
+A robot anchored wrongly is not undone here yet: the frame is committed only on
+agreeing evidence (``FrameEstimate``), and ``polyswarm bench merge`` counts wrong merges.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from polyswarm.config import Config
+from polyswarm.errors import PolyswarmError
+from polyswarm.mapmatch import FrameEstimate, MatchError, match_maps
+from polyswarm.se2 import compose
+from protocols.messages import Anchor
+
+log = logging.getLogger(__name__)
+
+MATCH_PERIOD_S = 5.0  # simulated (or sensor) seconds between matches of one robot's map
+MIN_MAP_M2 = 10.0  # a map smaller than this (either one) is not matched yet
+RESEND_S = 5.0  # an anchor the robot's poses do not name yet is sent again after this
+
+
+@dataclass
+class _Waiting:
+    """A robot exploring alone, and how far finding its frame has got."""
+
+    solo: object  # agents.coordinator.Coordinator, for this robot alone
+    frames: FrameEstimate = field(default_factory=FrameEstimate)
+    last_match_s: float = -math.inf
+    matching: Future | None = None
+    matches: int = 0
+    anchor: Anchor | None = None  # sent, not yet named by the robot's poses
+    anchor_sent_s: float = -math.inf
+
+
+class Anchoring:
+    """The robots of the swarm whose frames are not known yet (see the module)."""
+
+    def __init__(self, cfg: Config, unknown: list[str]) -> None:
+        from agents.coordinator import Coordinator
+
+        self.cfg = cfg
+        self.waiting = {rid: _Waiting(Coordinator(cfg, {rid: (0.0, 0.0, 0.0)})) for rid in unknown}
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="mapmatch") if unknown else None
+        self.anchored: dict[str, np.ndarray] = {}  # robot -> its frame in the shared one
+
+    def owner(self, rid: str, main):
+        """The coordinator that takes this robot's messages now."""
+        w = self.waiting.get(rid)
+        return main if w is None else w.solo
+
+    def coordinators(self) -> list:
+        return [w.solo for w in self.waiting.values()]
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+
+    # -- each loop of the coordinator ---------------------------------------------------------
+
+    def tick(self, main, now_s: float) -> list[tuple[str, Anchor]]:
+        """Start the matches that are due, take the finished ones; the anchors to send."""
+        out = []
+        for rid, w in self.waiting.items():
+            if w.matching is not None and w.matching.done():
+                self._took(rid, w, w.matching)
+                w.matching = None
+            if w.anchor is not None:
+                if now_s - w.anchor_sent_s >= RESEND_S:
+                    w.anchor_sent_s = now_s
+                    out.append((rid, w.anchor))
+                continue
+            if w.frames.pose is not None:  # committed: anchor it
+                x, y, th = (float(v) for v in w.frames.pose)
+                w.anchor, w.anchor_sent_s = Anchor(1, x, y, th), now_s
+                log.info(
+                    "robot %s anchored at (%.2f m, %.2f m, %.1f deg)", rid, x, y, math.degrees(th)
+                )
+                out.append((rid, w.anchor))
+                continue
+            own = w.solo.robots[rid].map
+            if (
+                w.matching is None
+                and now_s - w.last_match_s >= MATCH_PERIOD_S
+                and own is not None
+                and own.explored_area() >= MIN_MAP_M2
+                and main.merged.explored_area() >= MIN_MAP_M2
+            ):
+                w.last_match_s = now_s
+                w.matching = self._pool.submit(match_maps, main.merged, own)
+        return out
+
+    def _took(self, rid: str, w: _Waiting, done: Future) -> None:
+        try:
+            m = done.result()
+        except (MatchError, PolyswarmError) as e:
+            log.info("map of %s not matched: %s", rid, e)
+            return
+        w.matches += 1
+        before = w.frames.pose
+        w.frames.add(m)
+        log.info(
+            "map of %s against the merged map (match %d): %s%s",
+            rid,
+            w.matches,
+            m.summary(),
+            "" if m.accepted else " (refused)",
+        )
+        if before is None and w.frames.pose is not None:
+            log.info("frame of %s committed after %d matches", rid, w.matches)
+
+    def on_pose(self, rid: str, frame: int, map_version: int, main) -> bool:
+        """A pose of ``rid`` naming ``frame`` at its map ``map_version``: hands the robot
+        over to ``main`` once it names its anchor and its solo coordinator's copy of its
+        map has caught up (the anchor's correction replayed: the copy is in the shared
+        frame). True when it was handed over now."""
+        w = self.waiting.get(rid)
+        if w is None or frame == 0 or (w.anchor is not None and frame < w.anchor.frame):
+            return False
+        copy = w.solo.robots[rid].map
+        if copy is None or copy.version < map_version:
+            return False  # the correction is still on its way: the next pose tries again
+        from agents.coordinator import RobotInfo
+
+        del self.waiting[rid]
+        if w.anchor is None:  # anchored by this coordinator before it restarted
+            log.info("robot %s is in the shared frame already (anchor %d)", rid, frame)
+            pose = np.zeros(3)  # its start in the shared frame is not known here
+        else:
+            pose = np.array([w.anchor.x, w.anchor.y, w.anchor.theta])
+        self.anchored[rid] = pose
+        solo = w.solo.robots[rid]
+        info = main.robots[rid] = RobotInfo(rid, compose(pose, np.zeros(3)))
+        info.alive = solo.alive
+        if solo.map is not None:  # in the shared frame now: the anchor's correction moved it
+            main.on_robot_map(rid, solo.map)
+            info.atlas = solo.atlas
+        log.info("robot %s joins the swarm's map (%d matches)", rid, w.matches)
+        return True
