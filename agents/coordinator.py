@@ -84,6 +84,9 @@ REACHED_GRACE_S = 2.0  # a reached target's frontier may take this long to leave
 # the mission: simulated seconds run faster than wall seconds, a loaded coordinator may
 # manage a single cycle in end_confirm_s, and one cycle on a lagging map must not end it
 END_CONFIRM_CYCLES = 3
+# robots whose frames are not found hold the end of the exploration this long (simulated
+# s) after the last frontier: matches every 5 s need a few more views of a shared place
+FRAME_WAIT_S = 120.0
 MERGE_PERIOD_S = 1.0  # robots' changed cells are merged at least this often (batched)
 # after a look, a frontier point farther than this from every frontier vector has moved
 # on (the view opened the space behind it); the look failed if most (LOOK_OPEN_SHARE)
@@ -176,6 +179,7 @@ class Coordinator:
         self.map_fetches = 0  # robot maps fetched whole (a gap, or a merge that differed)
         self.fetch_bytes = 0  # ... and the bytes they took
         self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
+        self.frames_pending: tuple[str, ...] = ()  # robots exploring in frames of their own
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -474,6 +478,7 @@ class Coordinator:
                     if (
                         self.now - self._no_target_since >= self.cfg.explore.end_confirm_s
                         and self._no_target_cycles >= END_CONFIRM_CYCLES
+                        and not self._waiting_for_frames()
                     ):
                         self._end_exploration(live)
                 else:
@@ -517,6 +522,22 @@ class Coordinator:
             self.fetch_bytes,
         )
         return out
+
+    def _waiting_for_frames(self) -> bool:
+        """Robots whose frames are not found yet (``frames_pending``, set by the process)
+        hold the end of the exploration: their maps are not merged. After
+        ``FRAME_WAIT_S`` without targets it ends all the same, and says whose maps stay
+        out (on the robots, persisted)."""
+        if not self.frames_pending:
+            return False
+        if self.now - self._no_target_since < FRAME_WAIT_S:
+            return True
+        log.warning(
+            "no frontier left, and the frames of %s were never found: their maps stay out "
+            "of the merged map (on the robots, persisted)",
+            ", ".join(self.frames_pending),
+        )
+        return False
 
     def _update_targets(self, reach: Reach) -> dict[int, Target]:
         e = self.cfg.explore
@@ -860,6 +881,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                             solo.bytes_sent += bus.publish(
                                 keys.assignment(rid), a, solo.now, reliable=True
                             )
+                coord.frames_pending = tuple(anchoring.waiting)
                 now = max([coord.now, *(s.now for s in anchoring.coordinators())])
                 for rid, anchor in anchoring.tick(coord, now):
                     coord.bytes_sent += bus.publish(keys.anchor(rid), anchor, now, reliable=True)

@@ -75,3 +75,42 @@ def test_summary_gives_per_profile_and_world_the_seeds_the_reference_and_the_wor
 def test_plan_runs_carry_the_profile():
     runs = plan_runs(["office"], [3], seeds=1, nearest=False, profile="turtlebot4")
     assert [(r.world, r.profile) for r in runs] == [("office", "turtlebot4")]
+
+
+def test_unknown_starts_are_compared_with_the_same_starts_told():
+    from polyswarm.benchmarks.explore import plan_runs, summarise_unknown
+
+    runs = plan_runs(["office"], [3], 2, True, unknown_start=True)
+    assert [(r.seed, r.start) for r in runs] == [
+        (0, "scattered"),
+        (0, "unknown"),
+        (1, "scattered"),
+        (1, "unknown"),
+    ]  # the nearest-frontier baseline is not part of it
+
+    def row(seed, start, t99, anchors, unanchored=()):
+        return {
+            "profile": "thesis",
+            "world": "office",
+            "robots": 3,
+            "seed": seed,
+            "start": start,
+            "t99_s": t99,
+            "success": t99 is not None,
+            "anchors": anchors,
+            "unanchored": list(unanchored),
+        }
+
+    good = {"r2": {"err_m": 0.02, "err_deg": 0.1}, "r3": {"err_m": 0.05, "err_deg": 0.3}}
+    wrong = {"r2": {"err_m": 4.0, "err_deg": 0.1}}
+    res = summarise_unknown(
+        [
+            row(0, "scattered", 100.0, {}),
+            row(0, "unknown", 120.0, good),
+            row(1, "scattered", 100.0, {}),
+            row(1, "unknown", 150.0, wrong, ["r3"]),
+        ]
+    )["thesis"]["office"]["3"]
+    assert res["wrong_merges"] == 1 and not res["all_anchored"]
+    assert res["t99_ratio_median"] == 1.35 and res["t99_ratio_worst"] == 1.5
+    assert res["frame_err_m_max"] == 4.0

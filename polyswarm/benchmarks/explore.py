@@ -42,6 +42,7 @@ class RunSpec:
     strategy: str
     seed: int
     profile: str = "thesis"
+    start: str = "side-by-side"  # or "scattered" (told), "unknown" (scattered, not told)
 
 
 def plan_runs(
@@ -51,10 +52,20 @@ def plan_runs(
     nearest: bool,
     first_seed: int = 0,
     profile: str = "thesis",
+    unknown_start: bool = False,
 ) -> list[RunSpec]:
     """World x robot count (hungarian) x seed (``first_seed`` .. ``first_seed + seeds -
-    1``), plus 3-robot ``nearest`` on NEAREST_WORLDS."""
+    1``), plus 3-robot ``nearest`` on NEAREST_WORLDS. ``unknown_start``: instead, each
+    world, robot count and seed twice from the same scattered starts, told and not told."""
     seed_range = range(first_seed, first_seed + seeds)
+    if unknown_start:
+        return [
+            RunSpec(w, n, "hungarian", s, profile, start)
+            for w in worlds
+            for n in robots
+            for s in seed_range
+            for start in ("scattered", "unknown")
+        ]
     runs = [
         RunSpec(w, n, "hungarian", s, profile) for w in worlds for n in robots for s in seed_range
     ]
@@ -82,6 +93,8 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         stop_coverage=0.99,  # t99 is what is measured; returning home is not
         out=out,
         config=with_profile(Config(), spec.profile),
+        scatter=spec.start == "scattered",
+        unknown_start=spec.start == "unknown",
     )
     m = launch(opts).metrics
     row = {
@@ -90,6 +103,9 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         "strategy": spec.strategy,
         "seed": spec.seed,
         "profile": spec.profile,
+        "start": spec.start,
+        "anchors": m["anchors"],
+        "unanchored": m["unanchored"],
         "t90_s": m["t90_s"],
         "t99_s": m["t99_s"],
         "final_coverage": m["final_coverage"],
@@ -210,6 +226,62 @@ def summarise(rows: list[dict], references: dict | None = None) -> dict:
     }
 
 
+WRONG_FRAME_M, WRONG_FRAME_DEG = 1.0, 5.0  # an anchor this far off is a wrong merge
+FRAME_TARGET_M, FRAME_TARGET_DEG = 0.10, 1.0  # the issue's frame error
+UNKNOWN_SLACK = 1.3  # t99 with unknown starts at most this times the told starts' t99
+
+
+def summarise_unknown(rows: list[dict]) -> dict:
+    """Unknown against told starts, per profile, world and robot count, over the seeds:
+    success of the unknown runs, robots never anchored, anchors' errors and wrong ones,
+    and the t99 ratio (unknown / told, same seed and starts; median and worst)."""
+    told = {
+        (r["profile"], r["world"], r["robots"], r["seed"]): r
+        for r in rows
+        if r["start"] == "scattered"
+    }
+    out: dict = {}
+    for r in rows:
+        if r["start"] != "unknown":
+            continue
+        key = (r["profile"], r["world"], r["robots"])
+        cell = out.setdefault(key, {"runs": []})
+        base = told.get((*key, r["seed"]))
+        errs = list(r["anchors"].values())
+        cell["runs"].append(
+            {
+                "seed": r["seed"],
+                "t99_s": r["t99_s"],
+                "told_t99_s": base["t99_s"] if base else None,
+                "ratio": (r["t99_s"] / base["t99_s"])
+                if base and r["t99_s"] and base["t99_s"]
+                else None,
+                "success": r["success"],
+                "unanchored": r["unanchored"],
+                "frame_err_m_max": max((a["err_m"] for a in errs), default=None),
+                "frame_err_deg_max": max((a["err_deg"] for a in errs), default=None),
+                "wrong": sum(
+                    a["err_m"] > WRONG_FRAME_M or a["err_deg"] > WRONG_FRAME_DEG for a in errs
+                ),
+            }
+        )
+    res = {}
+    for (prof, world, n), cell in out.items():
+        runs = cell["runs"]
+        ratios = [x["ratio"] for x in runs]
+        res.setdefault(prof, {}).setdefault(world, {})[str(n)] = {
+            "runs": runs,
+            "success_rate": sum(x["success"] for x in runs) / len(runs),
+            "all_anchored": all(not x["unanchored"] for x in runs),
+            "wrong_merges": sum(x["wrong"] for x in runs),
+            "frame_err_m_max": max((x["frame_err_m_max"] or 0.0 for x in runs), default=None),
+            "frame_err_deg_max": max((x["frame_err_deg_max"] or 0.0 for x in runs), default=None),
+            "t99_ratio_median": _median_or_none(ratios),
+            "t99_ratio_worst": None if any(x is None for x in ratios) else max(ratios),
+        }
+    return res
+
+
 # --- coordinator cycle under load -------------------------------------------------------------
 
 
@@ -251,21 +323,23 @@ def run(
     on_run: Callable[[int, int, RunSpec, dict | None], None] | None = None,
     first_seed: int = 0,
     profiles: tuple[str, ...] = ("thesis",),
+    unknown_start: bool = False,
 ) -> dict:
     out = out or Path(tempfile.mkdtemp(prefix="polyswarm-bench-explore-"))
     runs = [
         spec
         for prof in profiles
-        for spec in plan_runs(worlds, robots, seeds, nearest, first_seed, prof)
+        for spec in plan_runs(worlds, robots, seeds, nearest, first_seed, prof, unknown_start)
     ]
     rows, references = [], {}
     for k, spec in enumerate(runs):
         if on_run:
             on_run(k, len(runs), spec, None)
         key = (spec.profile, spec.world, spec.robots)
-        if spec.strategy == "hungarian" and key not in references:
+        if spec.strategy == "hungarian" and spec.start == "side-by-side" and key not in references:
             references[key] = reference_t99(spec)
         name = f"{spec.profile}-{spec.world.replace(':', '_')}-{spec.robots}-{spec.strategy}"
+        name += "" if spec.start == "side-by-side" else f"-{spec.start}"
         t0 = time.monotonic()
         row = run_exploration(spec, out / f"{name}-{spec.seed}", speed, wall_limit_s)
         row["reference_t99_s"] = references.get(key)
@@ -273,7 +347,9 @@ def run(
         rows.append(row)
         if on_run:
             on_run(k, len(runs), spec, row)
-    res = summarise(rows, references)
+    res = summarise([r for r in rows if r["start"] == "side-by-side"], references)
+    if unknown_start:
+        res["unknown_start"] = summarise_unknown(rows)
     res["runs_detail"] = rows
     res["out"] = str(out)
     if load_robots > 0:

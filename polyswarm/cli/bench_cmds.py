@@ -424,6 +424,12 @@ def bench_explore(
     load_robots: int = typer.Option(10, help="Robots of the coordinator load test (0: skip)."),
     load_time: float = typer.Option(60.0, help="Simulated seconds of the load test."),
     out: Path = typer.Option(None, help="Folder of the runs (default: a temporary folder)."),
+    unknown_start: bool = typer.Option(
+        False,
+        "--unknown-start",
+        help="Instead: each run twice from the same scattered random starts, told and not "
+        "told (launch --unknown-start); frames found, wrong merges, t99 ratio.",
+    ),
 ) -> None:
     """Whole explorations (t99, success, IoU) against the idealised reference run for the
     same world, robots and profile, and the coordinator cycle under load.
@@ -468,12 +474,17 @@ def bench_explore(
             on_run,
             first_seed,
             names,
+            unknown_start,
         )
     _save(save, res)
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return
     from rich.table import Table
+
+    if unknown_start:
+        _unknown_table(res["unknown_start"], seeds)
+        return
 
     t = Table(title=f"Exploration, t99 over {seeds} seed(s) (simulated s)")
     for col in ("profile", "world", "robots", "t99 median", "reference", "ratio", "worst ratio"):
@@ -811,4 +822,30 @@ def bench_merge(
             "-" if m["delay_s_median"] is None else f"{m['delay_s_median']:.0f}",
             "-" if m["final_err_m_max"] is None else f"{m['final_err_m_max']:.3f}",
         )
+    Console().print(t)
+
+
+def _unknown_table(res: dict, seeds: int) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"Unknown starts against the same starts told, {seeds} seed(s)")
+    cols = ("profile", "world", "robots", "success", "all anchored", "wrong merges")
+    for col in (*cols, "frame err max", "t99 ratio median", "worst"):
+        t.add_column(col, justify="right")
+    for prof, ws in res.items():
+        for w, by_n in ws.items():
+            for n, d in by_n.items():
+                err = d["frame_err_m_max"]
+                t.add_row(
+                    prof,
+                    w,
+                    n,
+                    f"{d['success_rate']:.2f}",
+                    "yes" if d["all_anchored"] else "no",
+                    str(d["wrong_merges"]),
+                    "-" if err is None else f"{err:.3f} m, {d['frame_err_deg_max']:.2f} deg",
+                    "-" if d["t99_ratio_median"] is None else f"{d['t99_ratio_median']:.2f}",
+                    "-" if d["t99_ratio_worst"] is None else f"{d['t99_ratio_worst']:.2f}",
+                )
     Console().print(t)

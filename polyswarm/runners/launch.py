@@ -142,7 +142,9 @@ class LaunchOptions:
     view_port: int | None = None  # also run ``polyswarm view`` serving on this port
     restart: bool = True  # restart children that exit unexpectedly (False: stop the mission)
     # robots at scattered random starts (seeded, 10 m apart where the world allows, random
-    # headings) that nobody is told: only the simulator and the metrics know them
+    # headings; ``scatter``), which with ``unknown_start`` nobody is told: only the
+    # simulator and the metrics know them
+    scatter: bool = False
     unknown_start: bool = False
 
 
@@ -497,7 +499,7 @@ def prepare(opts: LaunchOptions):
 
     world = load_world(opts.world, seed=opts.seed)
     cfg = opts.config
-    if opts.unknown_start:
+    if opts.scatter or opts.unknown_start:
         starts = scattered_start_poses(world, opts.robots, cfg.sim.robot.radius_m, opts.seed)
     else:
         starts = spread_start_poses(world, opts.robots, cfg.sim.robot.radius_m)
