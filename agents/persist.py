@@ -74,35 +74,46 @@ def agent_paths(state_dir: str | Path, robot_id: str) -> tuple[Path, Path, Path]
 
 
 class SavedAgent(NamedTuple):
-    """What an agent resumes from: its map, its last pose in the map frame and the robot
-    base's odometry reading at that pose (None in state written without it)."""
+    """What an agent resumes from: its map, its last pose in the map frame, the robot
+    base's odometry reading at that pose (None in state written without it), and the
+    last anchor it applied (0: none; ``agents.anchoring``)."""
 
     map: GridPolyMap
     pose: np.ndarray
     odom: np.ndarray | None
+    frame: int = 0
 
 
-def _write_meta(meta_path: Path, robot_id: str, pose, version: int, odom=None) -> None:
+def _write_meta(
+    meta_path: Path, robot_id: str, pose, version: int, odom=None, frame: int = 0
+) -> None:
     meta = {"robot": robot_id, "pose": [float(v) for v in pose], "map_version": version}
     if odom is not None:
         meta["odom"] = [float(v) for v in odom]
+    if frame:
+        meta["frame"] = int(frame)
     _atomic_write(meta_path, json.dumps(meta).encode())
 
 
-def save_agent(state_dir: str | Path, robot_id: str, pmap: GridPolyMap, pose, odom=None) -> None:
+def save_agent(
+    state_dir: str | Path, robot_id: str, pmap: GridPolyMap, pose, odom=None, frame: int = 0
+) -> None:
     """A snapshot of the whole map and the pose; the journal starts empty again.
 
     ``odom``: the robot base's odometry at ``pose``. The base keeps counting while the
-    agent is down, so a restarted agent predicts where the robot went since."""
+    agent is down, so a restarted agent predicts where the robot went since. ``frame``:
+    the last anchor applied (the map and pose are in the shared frame since)."""
     map_path, meta_path, journal = agent_paths(state_dir, robot_id)
     save_map(map_path, pmap)
-    _write_meta(meta_path, robot_id, pose, pmap.version, odom)
+    _write_meta(meta_path, robot_id, pose, pmap.version, odom, frame)
     journal.unlink(missing_ok=True)
 
 
-def save_pose(state_dir: str | Path, robot_id: str, pose, version: int, odom=None) -> None:
+def save_pose(
+    state_dir: str | Path, robot_id: str, pose, version: int, odom=None, frame: int = 0
+) -> None:
     """The last pose only (shutdown: the map is already on disk, snapshot plus journal)."""
-    _write_meta(agent_paths(state_dir, robot_id)[1], robot_id, pose, version, odom)
+    _write_meta(agent_paths(state_dir, robot_id)[1], robot_id, pose, version, odom, frame)
 
 
 def _append(journal: Path, delta_bytes: bytes) -> None:
@@ -115,12 +126,12 @@ def _append(journal: Path, delta_bytes: bytes) -> None:
 
 
 def journal_delta(
-    state_dir: str | Path, robot_id: str, delta_bytes: bytes, pose, version, odom=None
+    state_dir: str | Path, robot_id: str, delta_bytes: bytes, pose, version, odom=None, frame=0
 ) -> None:
     """Append one encoded delta of the agent's map to its journal, and its pose."""
     _, meta_path, journal = agent_paths(state_dir, robot_id)
     _append(journal, delta_bytes)
-    _write_meta(meta_path, robot_id, pose, version, odom)
+    _write_meta(meta_path, robot_id, pose, version, odom, frame)
 
 
 def _replay_journal(journal: Path, pmap: GridPolyMap) -> GridPolyMap:
@@ -162,10 +173,13 @@ def load_agent(state_dir: str | Path, robot_id: str) -> SavedAgent | None:
             odom = np.array(odom, dtype=float)
             if odom.shape != (3,) or not np.isfinite(odom).all():
                 raise ValueError(f"bad odometry {meta['odom']!r}")
+        frame = meta.get("frame", 0)
+        if not isinstance(frame, int) or isinstance(frame, bool) or frame < 0:
+            raise ValueError(f"bad frame {frame!r}")
     except (ValueError, KeyError, TypeError, OSError) as e:
         _set_aside(meta_path, e)
         return None
-    return SavedAgent(pmap, pose, odom)
+    return SavedAgent(pmap, pose, odom, frame)
 
 
 def coordinator_paths(state_dir: str | Path) -> tuple[Path, Path]:

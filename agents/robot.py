@@ -189,11 +189,13 @@ class RobotAgent:
             self.stats.distance_m += float(np.hypot(*(pose[:2] - self._last_odom_xy)))
         self._last_odom_xy = pose[:2]
 
-    def resume(self, pmap: GridPolyMap, pose, odom=None) -> None:
+    def resume(self, pmap: GridPolyMap, pose, odom=None, frame: int = 0) -> None:
         """Continue from a persisted map and pose (the agent was restarted); ``odom``, the
-        odometry reading at that pose, lets SLAM follow the robot's motion since."""
+        odometry reading at that pose, lets SLAM follow the robot's motion since;
+        ``frame``, the last anchor applied (the map is in the shared frame since)."""
         self.slam.resume(pmap, pose, odom)
         self.pose = np.array(pose, dtype=float)
+        self.frame = max(self.frame, frame)
 
     @property
     def latest_odom_s(self) -> float:
@@ -591,7 +593,12 @@ def run_agent(
             bus.close()
             if state_dir:  # the map is on disk already (snapshot and journal): the pose
                 persist.save_pose(
-                    state_dir, robot_id, agent.pose, agent.slam.map.version, agent.slam.odom
+                    state_dir,
+                    robot_id,
+                    agent.pose,
+                    agent.slam.map.version,
+                    agent.slam.odom,
+                    agent.frame,
                 )
     return agent
 
@@ -607,11 +614,19 @@ def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -
     if wire is not None and state_dir:
         # on disk before anyone has seen it: a restart never reuses a published version
         if agent.journaled == 0 or agent.journaled >= persist.SNAPSHOT_EVERY:
-            persist.save_agent(state_dir, agent.id, agent.slam.map, agent.pose, agent.slam.odom)
+            persist.save_agent(
+                state_dir, agent.id, agent.slam.map, agent.pose, agent.slam.odom, agent.frame
+            )
             agent.journaled = 1
         else:
             persist.journal_delta(
-                state_dir, agent.id, wire, agent.pose, out.delta.version, agent.slam.odom
+                state_dir,
+                agent.id,
+                wire,
+                agent.pose,
+                out.delta.version,
+                agent.slam.odom,
+                agent.frame,
             )
             agent.journaled += 1
     _send(bus, me, agent, out, item.stamp_s, item.seq, sink, wire)
