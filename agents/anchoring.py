@@ -40,6 +40,7 @@ log = logging.getLogger(__name__)
 MATCH_PERIOD_S = 5.0  # simulated (or sensor) seconds between matches of one robot's map
 MIN_MAP_M2 = 10.0  # a map smaller than this (either one) is not matched yet
 RESEND_S = 5.0  # an anchor the robot's poses do not name yet is sent again after this
+SOLO_ID_OFFSET = 97_000_000  # solo coordinators' target ids start this far apart
 
 
 @dataclass
@@ -62,7 +63,12 @@ class Anchoring:
         from agents.coordinator import Coordinator
 
         self.cfg = cfg
-        self.waiting = {rid: _Waiting(Coordinator(cfg, {rid: (0.0, 0.0, 0.0)})) for rid in unknown}
+        self.waiting = {}
+        for k, rid in enumerate(unknown):
+            solo = Coordinator(cfg, {rid: (0.0, 0.0, 0.0)})
+            # target ids of its own: the main coordinator's must not repeat one it reached
+            solo._next_id = (solo._next_id + SOLO_ID_OFFSET * (k + 1)) % 1_000_000_000
+            self.waiting[rid] = _Waiting(solo)
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="mapmatch") if unknown else None
         self.anchored: dict[str, np.ndarray] = {}  # robot -> its frame in the shared one
 
