@@ -7,7 +7,7 @@ import shapely
 
 from polyswarm.config import Config, RobotEntry, known_starts
 from polyswarm.mapmatch import transform_map
-from polyswarm.polymap import cells_digest
+from polyswarm.polymap import GridPolyMap, cells_digest
 from polyswarm.se2 import compose, relative
 from polyswarm.slam import PolySlam
 
@@ -68,3 +68,56 @@ def test_an_anchored_slam_moves_its_map_as_one_correction_a_receiver_follows(sha
     copy = coord.robot("r1").map
     assert cells_digest(copy.cells.values()) == cells_digest(slam.map.cells.values())
     assert coord.gaps == 0
+
+
+def test_a_robot_is_merged_only_after_agreeing_matches_and_its_own_move():
+    """In-process: robot r2's map (its own frame) goes to its solo coordinator, never to
+    the merged map, until two matches agree, the anchor is sent, and a pose naming it
+    arrives with the copy caught up."""
+    import time
+
+    from shapely.geometry import box
+
+    from agents.anchoring import Anchoring
+    from agents.coordinator import Coordinator
+    from tests.test_mapmatch import _seen
+
+    truth = np.array([4.0, -3.0, 2.1])
+    a = _seen(box(-1, -8, 16, 9))  # r1's map, the shared frame
+    b = _seen(box(8, -8, 25, 9), truth)  # r2's, in its own frame
+    cfg = Config()
+    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
+    main.on_robot_map("r1", a)
+    main.flush()
+    area = main.merged.explored_area()
+    frames = Anchoring(cfg, ["r2"])
+    solo = frames.owner("r2", main)
+    assert solo is not main
+    solo.on_robot_map("r2", b)
+    sent = []
+    now = 0.0
+    for _ in range(400):  # matches every MATCH_PERIOD_S of mission time, in a worker
+        sent += frames.tick(main, now)
+        if sent:
+            break
+        now += 1.0
+        time.sleep(0.02)
+    assert sent, "no anchor after the matches"
+    rid, anchor = sent[0]
+    assert rid == "r2" and anchor.frame == 1
+    err_m = float(np.hypot(anchor.x - truth[0], anchor.y - truth[1]))
+    assert err_m < 0.05 and abs(anchor.theta - truth[2]) < 0.01
+    assert frames.waiting["r2"].matches >= 2  # one match is not trusted
+    main.flush()
+    assert main.merged.explored_area() == area  # nothing of r2 merged yet
+    # the robot's pose names the anchor, but its moved map has not arrived: not yet
+    assert not frames.on_pose("r2", 1, b.version + 1, main)
+    moved = transform_map(b, truth)
+    moved = GridPolyMap(moved.cell_size, moved.cells, b.version + 1)
+    solo.on_robot_map("r2", moved)  # (the anchor's correction, as a whole map here)
+    assert frames.on_pose("r2", 1, b.version + 1, main)
+    assert frames.owner("r2", main) is main and "r2" not in frames.waiting
+    main.flush()
+    both = shapely.union(a.explored_region(), moved.explored_region()).area
+    assert abs(main.merged.explored_area() - both) < 0.01 * both
+    frames.close()
