@@ -14,8 +14,10 @@ the pose of map B's frame in map A's frame, or says why it cannot:
    point-to-line ICP of B's wall points on A's walls.
 3. *Verify.* At the refined pose: the explored overlap, the length of wall both maps
    agree on, and the share of each map's walls standing in the other's clear space.
-   A match is accepted only with enough overlap and agreeing wall, few conflicts, and
-   no other peak nearly as good elsewhere (repeated rooms, symmetric corridors).
+   A match is accepted only with enough overlap and agreeing wall, few conflicts, no
+   other pose where the maps also fit without contradiction (a symmetric building: the
+   wrong image of a ring corridor may overlap more than the truth), and no other peak
+   nearly as good elsewhere (repeated rooms).
 
     m = match_maps(a, b)   # m.accepted, m.pose (B's frame in A's), m.reason, evidence
 
@@ -54,6 +56,7 @@ WALL_STEP_M = 0.10  # wall points are sampled this far apart (agreeing length = 
 ICP_ITERATIONS = 25
 ICP_OUTLIER_M = (0.6, 0.15)  # correspondence cut-off, from the search's blur to the noise
 NORMAL_WEIGHT_M = 0.3  # opposite wall faces are 0.6 m apart in the matching space
+ICP_MAX_SHIFT_M = 3.0  # ICP that wanders farther from the search's pose has diverged
 
 INLIER_M = 0.15  # a wall point this close to the other's wall agrees with it
 MIN_OVERLAP_M2 = 10.0  # explored area both maps share, at least (about two rooms' worth)
@@ -246,7 +249,7 @@ def _wall_tree(v: _MapView) -> cKDTree:
 def _icp(a: _MapView, tree: cKDTree, b: _MapView, pose: np.ndarray) -> np.ndarray:
     """Point-to-line ICP of B's wall points (own frame) on A's walls, the outlier
     cut-off shrinking over the first two thirds of the iterations."""
-    pose = pose.copy()
+    start, pose = pose.copy(), pose.copy()
     hold = 2 * ICP_ITERATIONS // 3
     for k in range(ICP_ITERATIONS):
         f = min(k / hold, 1.0)
@@ -266,6 +269,8 @@ def _icp(a: _MapView, tree: cKDTree, b: _MapView, pose: np.ndarray) -> np.ndarra
         step = np.linalg.lstsq(J, -res, rcond=None)[0]
         pose[:2] += step[:2]
         pose[2] = wrap(pose[2] + step[2])  # about the current translation, as dq above
+        if np.hypot(*(pose[:2] - start[:2])) > ICP_MAX_SHIFT_M:  # diverged: the search's
+            return start  # pose is kept, and verified as it is
         if k >= hold and np.abs(step).max() < 1e-5:
             break
     return pose
@@ -315,7 +320,8 @@ def _evidence(a: _MapView, b: _MapView, pose: np.ndarray) -> dict:
     }
 
 
-def _verdict(ev: dict, rival: float, margin_m: float) -> str:
+def _inconsistency(ev: dict) -> str:
+    """Why the maps do not fit at this pose ("" if they do)."""
     if ev["overlap_m2"] < MIN_OVERLAP_M2:
         return f"overlap {ev['overlap_m2']:.1f} m2 < {MIN_OVERLAP_M2} m2"
     if ev["agreeing_wall_m"] < MIN_AGREEING_WALL_M:
@@ -324,6 +330,15 @@ def _verdict(ev: dict, rival: float, margin_m: float) -> str:
         return f"only {ev['agreeing_share']:.0%} of the shared walls agree"
     if ev["conflict_share"] > MAX_CONFLICT_SHARE:
         return f"{ev['conflict_share']:.1%} of the walls stand in the other's clear space"
+    return ""
+
+
+def _verdict(ev: dict, rival: float, margin_m: float, others_fit: int) -> str:
+    why = _inconsistency(ev)
+    if why:
+        return why
+    if others_fit:  # a symmetric world: the maps fit elsewhere too, just overlap less
+        return f"ambiguous: the maps also fit without contradiction at {others_fit} other pose(s)"
     if rival > MAX_RIVAL_RATIO:
         return f"ambiguous: another pose scores {rival:.0%} of the best"
     if margin_m < MIN_MARGIN_WALL_M:
@@ -344,13 +359,12 @@ def match_maps(a: GridPolyMap, b: GridPolyMap) -> MapMatch:
         refined.append((p, _evidence(va, vb, p)))
     refined.sort(key=lambda r: -r[1]["score"])
     best, ev = refined[0]
-    rivals = [
-        r[1]["score"] for r in refined[1:] if not _close(r[0], best, RIVAL_APART_M, RIVAL_APART_RAD)
-    ]
-    rival_score = max(rivals, default=0.0)
+    others = [r for r in refined[1:] if not _close(r[0], best, RIVAL_APART_M, RIVAL_APART_RAD)]
+    rival_score = max((r[1]["score"] for r in others), default=0.0)
     rival = rival_score / max(ev["score"], 1e-9)
     margin_m = 0.5 * WALL_STEP_M * (ev["score"] - max(rival_score, 0.0))  # as agreeing wall
-    reason = _verdict(ev, rival, margin_m)
+    others_fit = sum(not _inconsistency(r[1]) for r in others)
+    reason = _verdict(ev, rival, margin_m, others_fit)
     return MapMatch(
         best,
         reason == "",

@@ -150,3 +150,16 @@ def test_the_peer_methods_grid_merging_finds_a_whole_moved_building(features):
     assert g.confidence >= DEFAULT_THRESHOLD
     err_m, err_rad = frame_error(g.pose, pose)
     assert err_m < 0.2 and err_rad < math.radians(1.0)
+
+
+def test_parts_of_a_symmetric_ring_corridor_are_not_merged():
+    """A square ring corridor looks the same after a quarter turn: B's stretch of it
+    fits A's in several places without contradiction, so no frame is accepted."""
+    ring = shapely.difference(box(0, 0, 20, 20), box(2, 2, 18, 18))
+    a_part = shapely.intersection(ring, box(-1, -1, 21, 11))  # the south half
+    b_part = shapely.intersection(ring, box(-1, 5, 11, 21))  # the north-west half
+    a = GridPolyMap.from_polygons(_typed(a_part, ring.boundary), CELL_M)
+    b = GridPolyMap.from_polygons(_typed(b_part, ring.boundary), CELL_M)
+    m = match_maps(a, transform_map(b, (3.0, 1.0, 0.7)))
+    assert not m.accepted
+    assert "ambiguous" in m.reason, m.summary()
