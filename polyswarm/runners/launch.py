@@ -129,7 +129,7 @@ class LaunchOptions:
     gui: bool = False
     time_limit_s: float = math.inf  # simulated seconds
     wall_limit_s: float = math.inf
-    stop_coverage: float = 0.0  # > 0: stop once the coverage reaches this fraction
+    stop_coverage: float = 0.0  # > 0: stop at this coverage (once every robot is merged)
     out: Path | None = None
     config: Config = field(default_factory=Config)
     verbose: bool = False
@@ -273,6 +273,10 @@ class Observer:
         err_m, err_rad = frame_error((a.x, a.y, a.theta), truth)
         self.anchors[rid] = {"t_s": self.sim_t, "err_m": err_m, "err_deg": math.degrees(err_rad)}
 
+    def unplaced(self) -> list[str]:
+        """Robots in frames of their own whose frames were not placed yet."""
+        return sorted((self.own_frames & set(self.robots)) - set(self.anchors))
+
     def sample(self) -> None:
         if not self.coverage or self.sim_t - self.coverage[-1][0] >= COVERAGE_EVERY_S:
             self.coverage.append((self.sim_t, self.coverage_now()))
@@ -369,7 +373,7 @@ class Observer:
             # robots whose starts nobody gave: when and how well their frames were placed,
             # and those never placed (their maps never joined the merged map)
             "anchors": self.anchors,
-            "unanchored": sorted((self.own_frames & set(self.robots)) - set(self.anchors)),
+            "unanchored": self.unplaced(),
             "coordinator_rss_mb_over_time": [
                 [round(t, 1), round(m, 1)] for t, m in self.coordinator_rss_mb
             ],
@@ -710,7 +714,12 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0, sup) ->
             return "wall-clock limit"
         if not up and now - t0 > START_TIMEOUT_S:
             return "processes did not start"
-        if opts.stop_coverage > 0 and obs.coverage and obs.coverage[-1][1] >= opts.stop_coverage:
+        if (
+            opts.stop_coverage > 0
+            and obs.coverage
+            and obs.coverage[-1][1] >= opts.stop_coverage
+            and not obs.unplaced()  # robots not merged yet: their maps are not in it
+        ):
             return f"coverage {opts.stop_coverage:.0%} reached"
 
 
