@@ -124,6 +124,9 @@ class Anchoring:
         except (MatchError, PolyswarmError) as e:
             log.info("map of %s not matched: %s", rid, e)
             return
+        except Exception:  # a failed match must not stop the coordinator: logged, retried
+            log.exception("matching the map of %s failed", rid)
+            return
         w.matches += 1
         before = w.frames.pose
         w.frames.add(m)
