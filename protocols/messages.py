@@ -369,6 +369,9 @@ class Assignment(Message):
         )
 
 
+MAX_ANCHOR_M = 1e5  # a frame farther than 100 km is not in the same building
+
+
 @dataclass(frozen=True)
 class Anchor(Message):
     """The coordinator to a robot whose start pose nobody gave: where its frame lies in
@@ -390,8 +393,8 @@ class Anchor(Message):
     def from_body(cls, b: dict) -> Anchor:
         return cls(
             _int(b.get("frame"), "frame", 1),
-            _num(b.get("x"), "x"),
-            _num(b.get("y"), "y"),
+            _num(b.get("x"), "x", -MAX_ANCHOR_M, MAX_ANCHOR_M),
+            _num(b.get("y"), "y", -MAX_ANCHOR_M, MAX_ANCHOR_M),
             _num(b.get("th"), "th", -1e3, 1e3),
         )
 

@@ -247,3 +247,5 @@ def test_a_pose_names_its_frame_only_once_anchored():
     assert (a.frame, a.x, a.y, a.theta) == (1, 3.0, -4.0, 1.5)
     with pytest.raises(ProtocolError):  # anchors count from 1
         decode(encode(Anchor(0, 3.0, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)
+    with pytest.raises(ProtocolError):  # not in the same building
+        decode(encode(Anchor(1, 3.0e6, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)
