@@ -72,10 +72,17 @@ def load(name: str, directory: Path = RESULTS_DIR) -> dict:
 
 
 def lookup(result: dict, key: str):
-    """The value at a dotted ``key`` (``runs.aces-corrected.keyframes``)."""
-    node = result
-    for part in key.split("."):
-        if not isinstance(node, dict) or part not in node:
-            raise PolyswarmError(f"no {key!r} in the result ({part!r} missing)")
-        node = node[part]
+    """The value at a dotted ``key`` (``runs.aces-corrected.keyframes``); a name that
+    holds a dot itself (``methods.akaze_conf1.0.wrong``) is found as one."""
+    node, parts = result, key.split(".")
+    while parts:
+        if not isinstance(node, dict):
+            raise PolyswarmError(f"no {key!r} in the result ({parts[0]!r} missing)")
+        for n in range(len(parts), 0, -1):  # the longest name that is there
+            name = ".".join(parts[:n])
+            if name in node:
+                node, parts = node[name], parts[n:]
+                break
+        else:
+            raise PolyswarmError(f"no {key!r} in the result ({parts[0]!r} missing)")
     return node
