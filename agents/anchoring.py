@@ -32,7 +32,6 @@ import numpy as np
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
 from polyswarm.mapmatch import FrameEstimate, MatchError, match_maps
-from polyswarm.se2 import compose
 from protocols.messages import Anchor
 
 log = logging.getLogger(__name__)
@@ -161,7 +160,7 @@ class Anchoring:
             pose = np.array([w.anchor.x, w.anchor.y, w.anchor.theta])
         self.anchored[rid] = pose
         solo = w.solo.robots[rid]
-        info = main.robots[rid] = RobotInfo(rid, compose(pose, np.zeros(3)))
+        info = main.robots[rid] = RobotInfo(rid, pose.copy())  # its start: its frame's origin
         info.alive = solo.alive
         if solo.map is not None:  # in the shared frame now: the anchor's correction moved it
             main.on_robot_map(rid, solo.map)
