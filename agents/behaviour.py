@@ -135,6 +135,16 @@ class Behaviour:
         if self._turn_left <= 0:
             self.mode = Mode.IDLE
 
+    def move_frame(self, frame) -> None:
+        """The map frame moved (an anchor put the robot into the shared frame): the trail
+        it recovers along moves with it, peers seen in the old frame are forgotten."""
+        c, s = math.cos(frame[2]), math.sin(frame[2])
+        self._trail = deque(
+            ((frame[0] + c * x - s * y, frame[1] + s * x + c * y) for x, y in self._trail),
+            maxlen=TRAIL_POINTS,
+        )
+        self.peers.clear()
+
     # -- inputs ---------------------------------------------------------------------------
 
     @property

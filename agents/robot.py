@@ -228,6 +228,8 @@ class RobotAgent:
         self.frame = a.frame
         self.start_pose = compose(frame, self.start_pose)
         self.behaviour.on_assignment(Assignment(AssignmentKind.STOP, -1), now_s, self.pose)
+        self.behaviour.move_frame(frame)
+        self.seen = SeenObstacles()  # seen in the old frame: the next scans see them again
         self.peers.clear()
         self.merged = self.merged_graph = None  # the merged map is fetched afresh
         log.info("%s: in the shared frame (anchor %d), at %s", self.id, a.frame, self.pose)

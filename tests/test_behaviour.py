@@ -107,3 +107,11 @@ def test_a_robot_that_cannot_get_on_backs_off_along_its_trail_then_hands_its_tar
     b.on_assignment(goal, 220.0, pose)
     _, seen = drive(b, pose, 20.0, wall_x=2.5, t0=220.0)
     assert Mode.RECOVER in [m for _, _, m in seen]
+
+
+def test_the_trail_moves_with_the_frame_when_the_robot_is_anchored():
+    b = behaviour()
+    for x in (0.0, 1.0, 2.0):
+        b._record_trail(np.array([x, 0.0, 0.0]))
+    b.move_frame((10.0, 5.0, math.pi / 2))  # the old frame's origin at (10, 5), turned left
+    assert np.allclose(list(b._trail), [(10.0, 5.0), (10.0, 6.0), (10.0, 7.0)])
