@@ -336,6 +336,25 @@ class Coordinator:
         self._rebuild |= idxs
         return MapDelta(op.cell_size, op.base_version, op.version, tuple(changed))
 
+    def on_robot_update(self, rid: str, stamp_s: float, kind: MapKind, wire: bytes):
+        """A robot's map update as its MapChunk carried it: decoded and applied; for a
+        merge or a correction the cells it changed (or None), for cells the delta itself.
+
+        Raises DecodeError on bad bytes, MapError (DeltaGapError) when it does not apply."""
+        with self.timed("decode"):
+            if kind == MapKind.MERGE:
+                op = decode_merge(wire)
+            elif kind == MapKind.CORRECT:
+                op = decode_correction(wire)
+            else:
+                op = decode_delta(wire)
+        if kind == MapKind.MERGE:
+            return self.on_robot_merge(rid, stamp_s, op)
+        if kind == MapKind.CORRECT:
+            return self.on_robot_correction(rid, stamp_s, op)
+        self.on_robot_delta(rid, stamp_s, op)
+        return op
+
     def on_robot_map(self, rid: str, pmap: GridPolyMap) -> None:
         """A robot's full map (resync): nothing it mapped is lost."""
         info = self.robot(rid)
@@ -817,24 +836,13 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         elif isinstance(msg, MapChunk) and item.payload is not None:
                             try:
                                 wire = item.payload
+                                changed = coord.on_robot_update(rid, item.stamp_s, msg.kind, wire)
                                 if msg.kind in (MapKind.MERGE, MapKind.CORRECT):
-                                    if msg.kind == MapKind.MERGE:
-                                        with coord.timed("decode"):
-                                            op = decode_merge(wire)
-                                        replayed = coord.on_robot_merge(rid, item.stamp_s, op)
-                                    else:
-                                        with coord.timed("decode"):
-                                            fix = decode_correction(wire)
-                                        replayed = coord.on_robot_correction(rid, item.stamp_s, fix)
                                     # journaled as the cells it changed (restores need no merge)
                                     wire = None
-                                    if replayed is not None and journal is not None:
+                                    if changed is not None and journal is not None:
                                         with coord.timed("journal"):
-                                            wire = encode_delta(replayed)
-                                else:
-                                    with coord.timed("decode"):
-                                        delta = decode_delta(wire)
-                                    coord.on_robot_delta(rid, item.stamp_s, delta)
+                                            wire = encode_delta(changed)
                             except MapError as e:
                                 log.info("resync of %s: %s", rid, e)
                                 coord.gaps += 1
@@ -940,12 +948,7 @@ def _robot_message(c: Coordinator, rid: str, item, resync: set) -> None:
         c.on_status(rid, item.stamp_s, msg)
     elif isinstance(msg, MapChunk) and item.payload is not None:
         try:
-            if msg.kind == MapKind.MERGE:
-                c.on_robot_merge(rid, item.stamp_s, decode_merge(item.payload))
-            elif msg.kind == MapKind.CORRECT:
-                c.on_robot_correction(rid, item.stamp_s, decode_correction(item.payload))
-            else:
-                c.on_robot_delta(rid, item.stamp_s, decode_delta(item.payload))
+            c.on_robot_update(rid, item.stamp_s, msg.kind, item.payload)
         except MapError as e:
             log.info("resync of %s: %s", rid, e)
             c.gaps += 1

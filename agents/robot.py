@@ -40,9 +40,6 @@ from polyswarm.se2 import compose, transform_points
 from polyswarm.slam import PolySlam
 from protocols.keys import SwarmKeys, check_name
 from protocols.mapcodec import (
-    CORRECTION_TYPE,
-    DELTA_TYPE,
-    MERGE_TYPE,
     decode_delta,
     decode_map,
     encode_cells_map,
@@ -50,6 +47,7 @@ from protocols.mapcodec import (
     encode_updates,
 )
 from protocols.messages import (
+    MAP_KIND_OF,
     MAX_STATUS_PATH_POINTS,
     Anchor,
     Assignment,
@@ -65,8 +63,6 @@ from protocols.messages import (
 )
 
 log = logging.getLogger(__name__)
-# the message type of an encoded map change -> the MapChunk kind it goes in
-_KINDS = {DELTA_TYPE: MapKind.DELTA, MERGE_TYPE: MapKind.MERGE, CORRECTION_TYPE: MapKind.CORRECT}
 
 POSE_PERIOD_S = 0.5  # pose messages to the coordinator (2 Hz)
 STATUS_PERIOD_S = 1.0
@@ -645,7 +641,7 @@ def _send(
         # a correction's poses, then the keyframe's merge when it is smaller than the
         # cells it changed (polyswarm.follow, protocols.mapcodec.encode_updates)
         for what, base, ver, payload in encode_updates(out.delta, out.op, out.correction, wire):
-            kind = _KINDS[what]
+            kind = MAP_KIND_OF[what]
             sent += bus.publish_map(me.map_delta, kind, payload, base, ver, stamp_s)
     if out.pose is not None:
         sent += bus.publish(me.pose, out.pose, stamp_s)

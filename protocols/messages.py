@@ -68,6 +68,14 @@ class MapKind(StrEnum):
     MAP = "map"  # a full polymap (3.2), the reply of a map queryable
 
 
+# the type of an encoded map change (``protocols.mapcodec``) -> the MapChunk kind it goes in
+MAP_KIND_OF = {
+    "polymap-delta": MapKind.DELTA,
+    "polymap-merge": MapKind.MERGE,
+    "polymap-correct": MapKind.CORRECT,
+}
+
+
 # --- field checks ------------------------------------------------------------------------
 
 

@@ -25,14 +25,8 @@ def test_an_anchored_slam_moves_its_map_as_one_correction_a_receiver_follows(sha
     kept from the wire follows it bit for bit, and SLAM goes on in the new frame."""
     from agents.coordinator import Coordinator
     from polyswarm.io.carmen import read_carmen, real_odometry
-    from protocols.mapcodec import (
-        CORRECTION_TYPE,
-        MERGE_TYPE,
-        decode_correction,
-        decode_delta,
-        decode_merge,
-        encode_updates,
-    )
+    from protocols.mapcodec import encode_updates
+    from protocols.messages import MAP_KIND_OF
 
     log = read_carmen(shared_data / "logs" / "aces-corrected.log.gz")
     odom = real_odometry(log)
@@ -54,12 +48,7 @@ def test_an_anchored_slam_moves_its_map_as_one_correction_a_receiver_follows(sha
         if step.delta is None:
             continue
         for what, _, _, wire in encode_updates(step.delta, step.op, step.correction):
-            if what == MERGE_TYPE:
-                coord.on_robot_merge("r1", float(s.stamp), decode_merge(wire))
-            elif what == CORRECTION_TYPE:
-                coord.on_robot_correction("r1", float(s.stamp), decode_correction(wire))
-            else:
-                coord.on_robot_delta("r1", float(s.stamp), decode_delta(wire))
+            coord.on_robot_update("r1", float(s.stamp), MAP_KIND_OF[what], wire)
         if k == anchored_at:  # right after the move: the map is the old one, moved
             moved = transform_map(before, frame).explored_region()
             now = slam.map.explored_region()

@@ -140,13 +140,8 @@ def test_slam_following_the_graph_sends_corrections_a_receiver_and_the_coordinat
     from agents.coordinator import Coordinator
     from polyswarm.benchmarks.bandwidth import Recording
     from polyswarm.io.carmen import read_carmen, real_odometry
-    from protocols.mapcodec import (
-        CORRECTION_TYPE,
-        MERGE_TYPE,
-        decode_delta,
-        decode_merge,
-        encode_updates,
-    )
+    from protocols.mapcodec import encode_updates
+    from protocols.messages import MAP_KIND_OF
 
     log = read_carmen(shared_data / "logs" / "aces-corrected.log.gz")
     odom = real_odometry(log)
@@ -161,12 +156,7 @@ def test_slam_following_the_graph_sends_corrections_a_receiver_and_the_coordinat
             continue
         rec.add("r1", float(s.stamp), s.scan, step.pose, step.delta, step.op, step.correction)
         for what, _, _, wire in encode_updates(step.delta, step.op, step.correction):
-            if what == MERGE_TYPE:
-                coord.on_robot_merge("r1", float(s.stamp), decode_merge(wire))
-            elif what == CORRECTION_TYPE:
-                coord.on_robot_correction("r1", float(s.stamp), decode_correction(wire))
-            else:
-                coord.on_robot_delta("r1", float(s.stamp), decode_delta(wire))
+            coord.on_robot_update("r1", float(s.stamp), MAP_KIND_OF[what], wire)
     rec.maps["r1"] = slam.map
     assert len(rec.correction_ms) >= 3, "too few loop closures moved the map"
     assert rec.replay_failures == 0 and rec.copies_identical()

@@ -53,15 +53,8 @@ def explore_in_process(
 
     from agents.coordinator import Coordinator
     from agents.robot import RobotAgent
-    from protocols.mapcodec import (
-        CORRECTION_TYPE,
-        MERGE_TYPE,
-        decode_correction,
-        decode_delta,
-        decode_merge,
-        encode_updates,
-    )
-    from protocols.messages import MissionState, Odometry
+    from protocols.mapcodec import encode_updates
+    from protocols.messages import MAP_KIND_OF, MissionState, Odometry
     from sim import Simulation, load_world, spread_start_poses
 
     cfg = cfg or Config()
@@ -95,12 +88,7 @@ def explore_in_process(
                 if out.delta is not None:  # what the agent sends: the merge or the cells
                     for what, _, _, wire in encode_updates(out.delta, out.op, out.correction):
                         delta_bytes += len(wire)
-                        if what == MERGE_TYPE:
-                            coord.on_robot_merge(a.id, sim.time, decode_merge(wire))
-                        elif what == CORRECTION_TYPE:
-                            coord.on_robot_correction(a.id, sim.time, decode_correction(wire))
-                        else:
-                            coord.on_robot_delta(a.id, sim.time, decode_delta(wire))
+                        coord.on_robot_update(a.id, sim.time, MAP_KIND_OF[what], wire)
                     if on_keyframe is not None:
                         on_keyframe(
                             a.id,
