@@ -61,6 +61,11 @@ def test_launch_two_robots_explores_rooms_to_95_percent(tmp_path):
     assert set(m["bytes_sent_per_robot"]) == {"r1", "r2"}
     assert all(b > 0 for b in m["bytes_sent_per_robot"].values())
     assert all(length > 0 for length in m["per_robot_path_length_m"].values())
+    # every process's resident memory was sampled; a robot's samples carry its keyframes
+    rss = m["rss_mb_over_time"]
+    assert set(rss) >= {"coordinator", "sim", "r1", "r2"}
+    assert all(mb > 10.0 for rows in rss.values() for _, mb, _ in rows)
+    assert rss["r1"][-1][2] > 0 and all(kf == 0 for _, _, kf in rss["coordinator"])
     # outputs: the merged map in three forms, trajectories, config, coverage plot
     merged = read_polymap(out / "map.polymap")
     assert merged.explored_area() > 0.9 * 54.0  # the rooms world has ~55 m2 of free space

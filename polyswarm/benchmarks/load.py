@@ -1,7 +1,7 @@
 """``polyswarm bench load``: many robots against one coordinator, over time.
 
 A ``polyswarm launch`` with N robots (every part its own process, Zenoh on loopback)
-runs for a wall-clock duration (the soak). Measured:
+runs for a wall-clock duration (the soak), on after the building is mapped. Measured:
 
 * ``coordinator_cycle_p95_ms``: from the coordinator's status messages (merge, frontiers,
   costs and assignment of each cycle, with the merges since the previous one), wall
@@ -14,10 +14,10 @@ runs for a wall-clock duration (the soak). Measured:
   transit as they happened (robot map updates that did not apply: lost, late, or
   replayed otherwise), and the whole-map fetches that healed them, with their bytes;
   ``messages_lost`` looks only at the end, after the fetches;
-* ``memory_growth_fraction``: the coordinator's resident memory at the end against
-  its value after the first tenth of the run (the map grows, so some growth is data);
-  ``memory_growth_fraction_second_half`` the same from the middle of the run, when a
-  30-minute soak has long finished mapping its world (a leak would still show there).
+* ``memory_growth_fraction``, ``memory_growth_fraction_second_half``: the coordinator's
+  resident memory, see ``memory_growth``; ``agent_memory_growth_second_half_max`` the
+  worst agent's, and ``agent_kb_per_keyframe_*`` an agent's memory per keyframe it made;
+  ``memory`` has every process's figures.
 
 On this 2-core machine ten agents with PolySLAM slow the lockstep simulation down;
 the figures are those of the coordinator under that load. The simulator and agents run
@@ -30,6 +30,10 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
+
+import numpy as np
+
+MIN_KEYFRAME_SPAN = 20  # keyframes a process must have added to fit its memory per keyframe
 
 
 def run(
@@ -52,6 +56,7 @@ def run(
         wall_limit_s=duration_s,
         out=out,
         robots_nice=robots_nice,
+        stop_when_done=False,  # the whole soak, mapping and then holding the map
     )
     m = launch(opts).metrics
     state = out / "state"
@@ -65,13 +70,11 @@ def run(
         got_v = received[rid].version if rid in received else 0
         per_robot[rid] = {"sent_version": sent_v, "received_version": got_v}
         lost += max(0, sent_v - got_v)
-    rss = m["coordinator_rss_mb_over_time"]
-    growth = growth_late = None
-    if len(rss) >= 3:
-        base = rss[max(1, len(rss) // 10)][1]
-        growth = (rss[-1][1] - base) / base
-        half = rss[len(rss) // 2][1]  # by then a soak long enough has mapped its world
-        growth_late = (rss[-1][1] - half) / half
+    memory = {name: memory_growth(rows) for name, rows in m["rss_mb_over_time"].items()}
+    agents_mem = [
+        v for k, v in memory.items() if k in per_robot and v["growth_second_half"] is not None
+    ]
+    coord = memory.get("coordinator", memory_growth([]))
     return {
         "robots": robots,
         "world": world,
@@ -84,11 +87,53 @@ def run(
         "coordinator_cycle_p95_ms": m["coordinator_cycle_p95_ms"],
         "coordinator_cycle_cpu_p95_ms": m["coordinator_cycle_cpu_p95_ms"],
         "robots_nice": robots_nice,
-        "memory_growth_fraction": growth,
-        "memory_growth_fraction_second_half": growth_late,
-        "coordinator_rss_mb_first_last": [rss[0][1], rss[-1][1]] if rss else None,
+        "memory_growth_fraction": coord["growth"],
+        "memory_growth_fraction_second_half": coord["growth_second_half"],
+        "coordinator_rss_mb_first_last": coord["mb_first_last"],
+        # the agents' worst: growth over the second half, and memory per keyframe
+        "agent_memory_growth_second_half_max": max(
+            (v["growth_second_half"] for v in agents_mem), default=None
+        ),
+        "agent_kb_per_keyframe_median": _median(v["kb_per_keyframe"] for v in agents_mem),
+        "agent_kb_per_keyframe_max": max(
+            (v["kb_per_keyframe"] for v in agents_mem if v["kb_per_keyframe"] is not None),
+            default=None,
+        ),
+        "agent_rss_mb_last_max": max((v["mb_first_last"][1] for v in agents_mem), default=None),
+        "memory": memory,
         "final_coverage": m["final_coverage"],
         "crashed_processes": m["crashed_processes"],
         "per_robot": per_robot,
         "out": str(out),
     }
+
+
+def memory_growth(rows: list) -> dict:
+    """Growth of one process's resident memory from rows of (wall s, MB, keyframes).
+
+    ``growth``: the end against the value after the first tenth of the run (the map
+    grows, so some growth is data); ``growth_second_half``: the same from the middle,
+    when a 30-minute soak has long finished mapping its world (a leak would still show
+    there); ``kb_per_keyframe``: the slope of memory over the keyframes a robot made
+    (least squares, from its first keyframe on: the imports before it are not data),
+    None for fewer than ``MIN_KEYFRAME_SPAN`` keyframes."""
+    out = {"mb_first_last": None, "growth": None, "growth_second_half": None}
+    out["kb_per_keyframe"] = None
+    if len(rows) < 3:
+        return out
+    mb = np.array([r[1] for r in rows], dtype=float)
+    kf = np.array([r[2] for r in rows], dtype=float)
+    base, half = mb[max(1, len(mb) // 10)], mb[len(mb) // 2]
+    out["mb_first_last"] = [float(mb[0]), float(mb[-1])]
+    out["growth"] = float((mb[-1] - base) / base)
+    out["growth_second_half"] = float((mb[-1] - half) / half)
+    mapping = kf > 0
+    if mapping.any() and kf.max() - kf[mapping].min() >= MIN_KEYFRAME_SPAN:
+        slope = np.polyfit(kf[mapping], mb[mapping], 1)[0]
+        out["kb_per_keyframe"] = float(slope * 1024.0)
+    return out
+
+
+def _median(values) -> float | None:
+    v = [x for x in values if x is not None]
+    return float(np.median(v)) if v else None

@@ -721,6 +721,8 @@ def bench_load(
         typer.echo(json.dumps(res, indent=2, default=float))
         return
     g, g2 = res["memory_growth_fraction"], res["memory_growth_fraction_second_half"]
+    ga = res["agent_memory_growth_second_half_max"]
+    kb, kb_max = res["agent_kb_per_keyframe_median"], res["agent_kb_per_keyframe_max"]
     _emit(
         res,
         False,
@@ -737,9 +739,19 @@ def bench_load(
             ("... its processor time p95", f"{res['coordinator_cycle_cpu_p95_ms']:.0f} ms"),
             ("coordinator memory growth", "-" if g is None else f"{100 * g:.1f} %"),
             ("... over the second half", "-" if g2 is None else f"{100 * g2:.1f} %"),
+            ("agents' memory growth over the second half, worst", _pct(ga)),
+            ("agents' memory per keyframe, median / worst", f"{_kb(kb)} / {_kb(kb_max)}"),
             ("crashed processes", ", ".join(res["crashed_processes"]) or "none"),
         ],
     )
+
+
+def _pct(fraction: float | None) -> str:
+    return "-" if fraction is None else f"{100 * fraction:.1f} %"
+
+
+def _kb(kb: float | None) -> str:
+    return "-" if kb is None else f"{kb:.1f} kB"
 
 
 @app.command("fuzz")

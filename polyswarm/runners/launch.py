@@ -73,7 +73,7 @@ VIEW = "view"  # the live view: its exit does not end the mission
 HUB = ("coordinator", "router")  # stopped last, so they receive what the robots sent last
 HUB_SHUTDOWN_S = 1.5  # ... and given this much of SHUTDOWN_S (writing the coordinator's
 #                       state is appending to its journal, not rewriting maps)
-RSS_EVERY_S = 5.0  # wall seconds between memory samples of the coordinator
+RSS_EVERY_S = 5.0  # wall seconds between memory samples of every process
 COVERAGE_EVERY_S = 1.0  # simulated seconds between coverage samples
 FINAL_FETCH_S = 2.0  # wall seconds to wait for the merged map at the end of a run
 START_TIMEOUT_S = 60.0  # wall seconds for all processes to come up
@@ -146,6 +146,9 @@ class LaunchOptions:
     # simulator and the metrics know them
     scatter: bool = False
     unknown_start: bool = False
+    # end with the mission (False: run to the time or wall-clock limit, as a soak test
+    # does to see whether memory keeps growing once the building is mapped)
+    stop_when_done: bool = True
 
 
 @dataclass
@@ -233,7 +236,8 @@ class Observer:
         self._cell_cover: dict = {}  # cell index -> (cell version, covered m2)
         self._truth_cells: dict = {}
         self.need_resync = False
-        self.coordinator_rss_mb: list[tuple[float, float]] = []  # (wall s, resident MB)
+        # every process's resident memory: name -> [(wall s, MB, the robot's keyframes)]
+        self.rss_mb: dict[str, list[tuple[float, float, int]]] = {}
         self._behind: float | None = None
 
     # coverage = explored space inside the reachable free space, over its area
@@ -330,6 +334,14 @@ class Observer:
             except MapError:
                 self.need_resync = True
 
+    def sample_memory(self, children: list[Child], wall_s: float) -> None:
+        for child in children:
+            rss = _rss_mb(child)
+            if rss is not None:
+                view = self.robots.get(child.name)
+                kf = view.keyframes if view is not None else 0
+                self.rss_mb.setdefault(child.name, []).append((wall_s, rss, kf))
+
     def metrics(self, wall_s: float, opts: LaunchOptions) -> dict:
         cov = self.coverage
 
@@ -374,9 +386,12 @@ class Observer:
             # and those never placed (their maps never joined the merged map)
             "anchors": self.anchors,
             "unanchored": self.unplaced(),
-            "coordinator_rss_mb_over_time": [
-                [round(t, 1), round(m, 1)] for t, m in self.coordinator_rss_mb
-            ],
+            # resident memory of every process over the run (wall s, MB; an agent's row
+            # also has its keyframes then, to tell memory that follows the map from a leak)
+            "rss_mb_over_time": {
+                name: [[round(t, 1), round(m, 1), kf] for t, m, kf in rows]
+                for name, rows in self.rss_mb.items()
+            },
         }
 
 
@@ -599,6 +614,7 @@ def launch(
                 bus.subscribe(keys.all_robots("map/delta"), MapChunk)
                 bus.subscribe(keys.all_anchors, Anchor)
                 error = _watch(bus, keys, obs, opts, children, stop, progress, t0, sup)
+                obs.sample_memory(children, time.monotonic() - t0)  # as the run ended
                 if error != "interrupted":
                     _final_sync(bus, keys, obs)
             finally:
@@ -687,9 +703,7 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0, sup) ->
         obs.sample()
         if time.monotonic() - last_rss >= RSS_EVERY_S:
             last_rss = time.monotonic()
-            rss = _rss_mb(next((c for c in children if c.name == "coordinator"), None))
-            if rss is not None:
-                obs.coordinator_rss_mb.append((last_rss - t0, rss))
+            obs.sample_memory(children, last_rss - t0)
         now = time.monotonic()
         if progress is not None and now - last_progress >= 0.5:
             last_progress = now
@@ -706,7 +720,7 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0, sup) ->
         failed = supervise(children, faulted, opts.restart, logs, now)
         if failed:
             return failed
-        if obs.mission == MissionState.DONE:
+        if obs.mission == MissionState.DONE and opts.stop_when_done:
             return "mission done"
         if obs.sim_t >= opts.time_limit_s:
             return "time limit"
