@@ -364,9 +364,8 @@ def _nearest_view_point(
     score = d.copy()
     if along is not None and np.hypot(*along) > 1e-9:
         u = along / np.hypot(*along)
-        sin = np.abs(np.cross(np.broadcast_to(u, nodes.shape), nodes - target)) / np.maximum(
-            d, 1e-9
-        )
+        rel = nodes - target  # 2D cross product (numpy's np.cross of 2-vectors is deprecated)
+        sin = np.abs(u[0] * rel[:, 1] - u[1] * rel[:, 0]) / np.maximum(d, 1e-9)
         score = d + FALLBACK_GRAZING_PENALTY_M * (sin < FALLBACK_MIN_SIN)
     order = np.argsort(score)
     order = order[d[order] <= radius_m]

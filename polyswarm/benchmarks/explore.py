@@ -25,8 +25,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 log = logging.getLogger(__name__)
 
 REFERENCE_SLACK = 1.5  # our t99 may be at most this times the reference
@@ -282,34 +280,6 @@ def summarise_unknown(rows: list[dict]) -> dict:
     return res
 
 
-# --- coordinator cycle under load -------------------------------------------------------------
-
-
-def coordinator_cycles(
-    world_name: str = "data:maze", robots: int = 10, sim_s: float = 60.0, seed: int = 0
-) -> dict:
-    """Explore ``world_name`` with ``robots`` robots in one process; the coordinator's
-    cycle times (ms) including all the work in its thread since the previous cycle
-    (replaying robots' merges, merging, planning), and each stage's share of it."""
-    from polyswarm.benchmarks.inproc import explore_in_process
-
-    run = explore_in_process(world_name, robots, sim_s, seed)
-    ms = np.array(run.coordinator.cycle_ms[1:] or [0.0])
-    return {
-        "world": world_name,
-        "robots": robots,
-        "sim_time_s": sim_s,
-        "cycles": int(ms.size),
-        "cycle_p50_ms": float(np.percentile(ms, 50)),
-        "cycle_p95_ms": float(np.percentile(ms, 95)),
-        "cycle_max_ms": float(ms.max()),
-        "merged_cells": len(run.coordinator.merged.cells),
-        "explored_m2": run.coordinator.merged.explored_area(),
-        "robot_delta_bytes": run.delta_bytes,
-        "stage_share": run.coordinator.stage_shares(),
-    }
-
-
 def run(
     worlds: list[str],
     robots: list[int],
@@ -353,6 +323,8 @@ def run(
     res["runs_detail"] = rows
     res["out"] = str(out)
     if load_robots > 0:
+        from polyswarm.benchmarks.cycle import coordinator_cycles
+
         load = coordinator_cycles(robots=load_robots, sim_s=load_sim_s)
         res["coordinator_load"] = load
         res[f"coordinator_cycle_p95_ms_{load_robots}_robots"] = load["cycle_p95_ms"]

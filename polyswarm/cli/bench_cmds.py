@@ -861,3 +861,53 @@ def _unknown_table(res: dict, seeds: int) -> None:
                     "-" if d["t99_ratio_worst"] is None else f"{d['t99_ratio_worst']:.2f}",
                 )
     Console().print(t)
+
+
+@bench_app.command("cycle")
+def bench_cycle(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    worlds: str = typer.Option(
+        "office,rooms,furnished,data:nav2-depot,data:loop,data:cross,data:zigzag,data:maze",
+        help="Worlds, comma separated.",
+    ),
+    robots: int = typer.Option(3, min=1, help="Robots per run."),
+    sim_time: float = typer.Option(
+        600.0, min=1.0, help="Simulated seconds at most (a run ends with its mission)."
+    ),
+    seed: int = typer.Option(0, help="Seed of the worlds and the simulation."),
+) -> None:
+    """The coordinator's cycle per world, all its work included (replays, merge, plan)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from polyswarm.benchmarks import cycle
+
+    with Console(stderr=True).status("cycle") as status:
+        res = cycle.run(
+            tuple(w for w in worlds.split(",") if w),
+            robots,
+            sim_time,
+            seed,
+            lambda what: status.update(f"cycle: {what}"),
+        )
+    _save(save, res)
+    if as_json:
+        typer.echo(json.dumps(res, indent=2, default=float))
+        return
+    t = Table(title=f"Coordinator cycle, {robots} robots (target p95: {res['target_p95_ms']} ms)")
+    cols = ("world", "simulated s", "cycles", "p50 ms", "p95 ms", "max ms", "processor p95 ms")
+    for col in (*cols, "replay share"):
+        t.add_column(col, justify="left" if col == "world" else "right")
+    for w, r in res["worlds"].items():
+        t.add_row(
+            w,
+            f"{r['sim_time_s']:.0f}",
+            str(r["cycles"]),
+            f"{r['cycle_p50_ms']:.0f}",
+            f"{r['cycle_p95_ms']:.0f}",
+            f"{r['cycle_max_ms']:.0f}",
+            f"{r['cycle_cpu_p95_ms']:.0f}",
+            f"{100 * r['stage_share'].get('replay', 0.0):.0f} %",
+        )
+    Console().print(t)
