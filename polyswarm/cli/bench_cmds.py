@@ -911,3 +911,27 @@ def bench_cycle(
             f"{100 * r['stage_share'].get('replay', 0.0):.0f} %",
         )
     Console().print(t)
+
+
+@bench_app.command("memory")
+def bench_memory(as_json: bool = JSON_OPT, save: str | None = SAVE_OPT) -> None:
+    """What a robot's SLAM keeps per keyframe (Python heap), on the shared logs."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import memory
+
+    with Console(stderr=True).status("memory") as status:
+        res = memory.run(lambda name: status.update(f"memory: {name}"))
+    _save(save, res)
+    rows = []
+    for name, r in res["logs"].items():
+        half = r["kb_per_keyframe_second_half"]
+        rows.append(
+            (
+                f"{name} ({r['keyframes']} keyframes, {r['odometry']} odometry)",
+                "-"
+                if half is None
+                else f"{half:.1f} kB per keyframe, second half; heap {r['heap_mb_last']:.1f} MB",
+            )
+        )
+    _emit(res, as_json, "SLAM memory per keyframe (Python heap)", rows)
