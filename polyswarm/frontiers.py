@@ -147,18 +147,32 @@ def _split(points: np.ndarray, max_length: float) -> list[tuple[np.ndarray, floa
 
 
 def extract_frontiers(
-    polymap: GridPolyMap, min_length_m: float = 0.0, max_length_m: float = 0.0
+    polymap: GridPolyMap,
+    min_length_m: float = 0.0,
+    max_length_m: float = 0.0,
+    cache: dict | None = None,
 ) -> list[FrontierSegment]:
     """Frontier vectors of the map chained into segments.
 
     Segments shorter than ``min_length_m`` are dropped; longer than ``max_length_m``
     (if positive) are split, so that several robots can share a long frontier.
+    ``cache`` (kept by the caller between calls): the pieces of every chain split last
+    time, by its points; a chain the map did not change is not split again (same result).
     """
     s, e, _ = polymap.vectors([VectorType.FRONTIER])
     out = []
+    old = cache.copy() if cache is not None else {}
+    if cache is not None:
+        cache.clear()  # only this call's chains are kept: it does not grow
     for n, chain in enumerate(chain_vectors(s, e)):
         pts = np.vstack([s[chain], e[chain[-1]][None, :]])
-        for piece, length, mid in _split(pts, max_length_m):
+        key = (pts.tobytes(), max_length_m)
+        pieces = old.get(key)
+        if pieces is None:
+            pieces = _split(pts, max_length_m)
+        if cache is not None:
+            cache[key] = pieces
+        for piece, length, mid in pieces:
             if length >= min_length_m and length > 0:
                 seg = FrontierSegment(piece, length, n)
                 seg.__dict__["midpoint"] = mid  # the cached property, known already

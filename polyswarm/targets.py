@@ -133,40 +133,9 @@ def frontier_targets(
     surroundings did not change; the result is the same with or without it."""
     sensor = sensor or Sensor()
     usable = graph.has_node if reach is None else reach.reaches
-    segs = extract_frontiers(pmap, min_length_m, max_length_m)
+    segs, facts, gains = _map_facts(pmap, graph, min_length_m, max_length_m, cache, sensor)
     if not segs:
         return []
-    # what depends on the map alone is reused while the cells around a segment stay
-    offsets = sensor.goal_offsets_m
-    reach_m = max(offsets) + graph.radius + SLIVER_PROBE_M
-    keys = [(s.points.tobytes(), _cells_around(pmap, s, reach_m)) for s in segs]
-    old = cache.entries if cache is not None else {}
-    facts = [old.get(key) for key in keys]
-    todo = [k for k, f in enumerate(facts) if f is None]
-    fresh = _segment_facts(pmap, [segs[k] for k in todo], graph.radius, offsets)
-    for k, f in zip(todo, fresh, strict=True):
-        facts[k] = f
-    if cache is not None:
-        cache.entries = dict(zip(keys, facts, strict=True))
-    # the unexplored area behind each frontier looks farther: cached on its own
-    gains = np.zeros(len(segs))
-    if GAIN_WEIGHT > 0:
-        radius = sensor.gain_radius_m
-        gkeys = [
-            None
-            if f.sliver
-            else (s.points.tobytes(), radius, _cells_versions(pmap, s.midpoint, radius))
-            for s, f in zip(segs, facts, strict=True)
-        ]
-        old_g = cache.gains if cache is not None else {}
-        todo = [k for k, key in enumerate(gkeys) if key is not None and key not in old_g]
-        behind = unexplored_behind(pmap, [segs[k] for k in todo], radius)
-        fresh = dict(zip(todo, behind, strict=True))
-        for k, key in enumerate(gkeys):
-            if key is not None:
-                gains[k] = fresh[k] if k in fresh else old_g[key]
-        if cache is not None:
-            cache.gains = {key: g for key, g in zip(gkeys, gains, strict=True) if key is not None}
     out = []
     black = np.array(blacklist, dtype=float).reshape(-1, 2)
     node_pts = None
@@ -201,6 +170,55 @@ def frontier_targets(
     return out
 
 
+def _map_facts(pmap, graph, min_length_m, max_length_m, cache, sensor) -> tuple:
+    """The frontier segments of ``pmap``, their facts and the unexplored area behind
+    each: what depends on the map and its graph alone (``frontier_targets``)."""
+    params = (min_length_m, max_length_m, sensor)
+    last = cache.last if cache is not None else None
+    if last is not None and last[0] is pmap and last[1] is graph and last[2] == params:
+        return last[3]  # nothing changed since the last call (a cycle on an event)
+    segs = extract_frontiers(
+        pmap, min_length_m, max_length_m, cache.pieces if cache is not None else None
+    )
+    if not segs:
+        return [], [], np.zeros(0)
+    # what depends on the map alone is reused while the cells around a segment stay
+    offsets = sensor.goal_offsets_m
+    reach_m = max(offsets) + graph.radius + SLIVER_PROBE_M
+    keys = [(s.points.tobytes(), _cells_around(pmap, s, reach_m)) for s in segs]
+    old = cache.entries if cache is not None else {}
+    facts = [old.get(key) for key in keys]
+    todo = [k for k, f in enumerate(facts) if f is None]
+    fresh = _segment_facts(pmap, [segs[k] for k in todo], graph.radius, offsets)
+    for k, f in zip(todo, fresh, strict=True):
+        facts[k] = f
+    if cache is not None:
+        cache.entries = dict(zip(keys, facts, strict=True))
+    # the unexplored area behind each frontier looks farther: cached on its own
+    gains = np.zeros(len(segs))
+    if GAIN_WEIGHT > 0:
+        radius = sensor.gain_radius_m
+        gkeys = [
+            None
+            if f.sliver
+            else (s.points.tobytes(), radius, _cells_versions(pmap, s.midpoint, radius))
+            for s, f in zip(segs, facts, strict=True)
+        ]
+        old_g = cache.gains if cache is not None else {}
+        todo = [k for k, key in enumerate(gkeys) if key is not None and key not in old_g]
+        behind = unexplored_behind(pmap, [segs[k] for k in todo], radius)
+        fresh = dict(zip(todo, behind, strict=True))
+        for k, key in enumerate(gkeys):
+            if key is not None:
+                gains[k] = fresh[k] if k in fresh else old_g[key]
+        if cache is not None:
+            cache.gains = {key: g for key, g in zip(gkeys, gains, strict=True) if key is not None}
+    out = (segs, facts, gains)
+    if cache is not None:
+        cache.last = (pmap, graph, params, out)
+    return out
+
+
 @dataclass
 class TargetCache:
     """Facts of frontier segments that depend on the map alone (sliver or not, goal
@@ -209,6 +227,8 @@ class TargetCache:
 
     entries: dict = field(default_factory=dict)
     gains: dict = field(default_factory=dict)  # unexplored area behind a segment, m2
+    pieces: dict = field(default_factory=dict)  # frontier chains split (``extract_frontiers``)
+    last: tuple | None = None  # (map, graph, parameters, result) of the last call
 
 
 @dataclass(frozen=True)

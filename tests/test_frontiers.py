@@ -82,6 +82,13 @@ def test_cached_targets_are_those_computed_afresh_and_follow_map_changes(monkeyp
     assert min(t.frontier.points[:, 0].min() for t in second) < 13.0
     # each open side looks onto a whole half disc of unexplored space
     assert all(t.utility_m > 3.6 + 10.0 for t in second)
+    # the split chains kept are this map's: one per frontier chain
+    assert len(cache.pieces) == len({t.frontier.chain for t in second})
+    # the same map and graph again (a cycle on an event): the segments are reused whole
+    graph = NavGraph.build(pmap, 0.3)
+    again = [frontier_targets(pmap, graph, 0.4, 4.0, cache=cache) for _ in range(2)]
+    assert [t.frontier for t in again[0]] == [t.frontier for t in again[1]]  # same objects
+    assert [t.goal.tolist() for t in again[1]] == [t.goal.tolist() for t in second]
 
 
 def _chains_by_search(starts: np.ndarray, ends: np.ndarray) -> list[list[int]]:
