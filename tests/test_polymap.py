@@ -632,3 +632,21 @@ def test_only_neighbours_across_a_changed_border_are_read_again():
     corner = shapely.Polygon([(0.0, 1.0), (1.0, 0.5), (1.0, 1.5)])
     got = _across_changed_borders([(0, 0)], np.array([shapely.Polygon()]), np.array([corner]), 2.0)
     assert got == {(-1, 0)}
+
+
+def test_a_cell_emptied_by_a_correction_does_not_block_merges_beside_it():
+    # a loop correction moved all of a cell's space out: the map keeps it as an empty cell
+    # (sent so that receivers drop that space). Merging next to it must still work: a
+    # 2 m cell at (1, 0) explored, (2, 0) emptied, then space grows in (1, 0) up to x = 4
+    from polyswarm.polymap import Cell
+
+    pmap = GridPolyMap(2.0).merge(rect(2.2, 0.2, 3.6, 1.8, (O, F, O, O))).map
+    cells = dict(pmap.cells)
+    cells[(2, 0)] = Cell((2, 0), 2.0, ())
+    pmap = GridPolyMap(2.0, cells, pmap.version)
+    grown = pmap.merge(rect(2.2, 0.2, 4.0, 1.8, (O, F, O, O))).map  # reaches the border
+    assert grown.cells[(1, 0)].area == pytest.approx(1.8 * 1.6)
+    # and merged as another robot's cell, as the coordinator merges it
+    other = GridPolyMap(2.0).merge(rect(2.2, 0.2, 4.0, 1.8, (O, F, O, O))).map
+    merged = pmap.merge_cells([other.cells[(1, 0)]]).map
+    assert merged.cells[(1, 0)].area == pytest.approx(1.8 * 1.6)
