@@ -42,6 +42,10 @@ from sim.shapes import WALL_HEIGHT_M, World
 
 log = logging.getLogger(__name__)
 
+# rays per rayTestBatch call: below pybullet's MAX_RAY_INTERSECTION_BATCH_SIZE (16384; a
+# batch of exactly that many returns no results, measured), which 23 robots with
+# 720-beam lidars scanning in one step exceed
+RAY_BATCH = 8192
 ROBOT_HEIGHT_M = 0.4  # body height; the lidar rays run at cfg.lidar.height_m
 # rays start at the lidar (the robot's centre): robots have no bodies among the walls, so
 # nothing of its own is in the way. (Rays that started outside the body went through a
@@ -445,9 +449,14 @@ class Simulation:
             frm.append(np.column_stack([x + r0 * dx, y + r0 * dy, z]))
             to.append(np.column_stack([x + lid.range_max_m * dx, y + lid.range_max_m * dy, z]))
             rays.append((x, y, dx, dy))
-        res = self._client.rayTestBatch(
-            np.vstack(frm), np.vstack(to), numThreads=self.cfg.raycast_threads
-        )
+        frm, to = np.vstack(frm), np.vstack(to)
+        res = []  # pybullet casts at most MAX_RAY_INTERSECTION_BATCH_SIZE rays per call
+        for k in range(0, len(frm), RAY_BATCH):
+            res += self._client.rayTestBatch(
+                frm[k : k + RAY_BATCH], to[k : k + RAY_BATCH], numThreads=self.cfg.raycast_threads
+            )
+        if len(res) != len(frm):  # pragma: no cover - a pybullet that casts fewer
+            raise SimulationError(f"pybullet cast {len(res)} of {len(frm)} rays")
         frac_hit = np.fromiter((h[2] for h in res), dtype=float, count=len(res))
         hit = np.fromiter((h[0] >= 0 for h in res), dtype=bool, count=len(res))
         out, n = [], len(beams)

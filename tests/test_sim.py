@@ -284,3 +284,16 @@ def test_the_furnished_world_is_seeded_and_cluttered():
     legs = [p for p in parts if p.area < 0.01]  # desk and chair legs, columns
     assert len(legs) >= 40
     assert 300 < a.free_area < 380  # 24 m x 16 m less walls and furniture
+
+
+def test_more_rays_in_one_step_than_pybullet_casts_in_one_batch():
+    # 25 robots x 720 beams = 18,000 rays (pybullet's batch limit is 16,384): each robot
+    # still sees the analytic walls of a 24 m x 24 m room (robots 2 m apart, noise off)
+    world = world_from_walls("big", walls_from_lines([square(0, 0, 24, 24)], 0.2), (2.0, 2.0))
+    poses = [(2.0 + 4.0 * (k % 5), 2.0 + 4.0 * (k // 5), 0.0) for k in range(25)]
+    with Simulation(world, cfg(lidar={"noise_sigma_m": 0.0}), 25, start_poses=poses) as sim:
+        scans = sim.scan()
+    assert len(scans) == 25
+    last = scans[-1].scan  # robot 24, at (18, 18): its wall at x = 23.9 straight ahead
+    ahead = np.argmin(np.abs(last.angles))
+    assert last.ranges[ahead] == pytest.approx(23.9 - 18.0, abs=1e-4)  # float32 in pybullet
