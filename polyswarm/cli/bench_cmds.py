@@ -895,7 +895,9 @@ def bench_cycle(
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return
-    t = Table(title=f"Coordinator cycle, {robots} robots (target p95: {res['target_p95_ms']} ms)")
+    target = res["target_p95_ms"]
+    goal = "" if target is None else f" (target p95: {target:.0f} ms)"
+    t = Table(title=f"Coordinator cycle, {robots} robots{goal}")
     cols = ("world", "simulated s", "cycles", "p50 ms", "p95 ms", "max ms", "processor p95 ms")
     for col in (*cols, "replay share"):
         t.add_column(col, justify="left" if col == "world" else "right")
