@@ -450,7 +450,7 @@ class Simulation:
             to.append(np.column_stack([x + lid.range_max_m * dx, y + lid.range_max_m * dy, z]))
             rays.append((x, y, dx, dy))
         frm, to = np.vstack(frm), np.vstack(to)
-        res = []  # pybullet casts at most MAX_RAY_INTERSECTION_BATCH_SIZE rays per call
+        res = []  # pybullet casts fewer than MAX_RAY_INTERSECTION_BATCH_SIZE rays per call
         for k in range(0, len(frm), RAY_BATCH):
             res += self._client.rayTestBatch(
                 frm[k : k + RAY_BATCH], to[k : k + RAY_BATCH], numThreads=self.cfg.raycast_threads

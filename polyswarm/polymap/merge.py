@@ -303,7 +303,7 @@ class Merging:
             if cell is None:
                 # union never shrinks a region; a cell a correction emptied (kept as an
                 # empty cell) stays as it is when a neighbour's merge touches it
-                if prev is not None and prev.polygons:  # pragma: no cover
+                if prev is not None and prev.polygons:  # pragma: no cover - never seen
                     raise MapError(f"merge would remove explored space in cell {ix}")
                 continue
             if cell.same_content(prev):
