@@ -20,6 +20,11 @@ SAVE_OPT = typer.Option(
 )
 
 
+def _names(text: str) -> tuple[str, ...]:
+    """The names of a comma-separated option (``office,data:maze``), empty ones left out."""
+    return tuple(n for n in text.split(",") if n)
+
+
 def _save(name: str | None, result: dict) -> None:
     if name:
         from polyswarm.benchmarks.results import save
@@ -255,7 +260,7 @@ def bench_slam(
     with console.status("PolySLAM") as status:
         res = slambench.run(
             lambda what: status.update(f"PolySLAM: {what}"),
-            tuple(w for w in worlds.split(",") if w),
+            _names(worlds),
             log_seeds,
         )
     _save(save, res)
@@ -441,7 +446,7 @@ def bench_explore(
     from polyswarm.benchmarks import explore as eb
     from polyswarm.config import Config, with_profile
 
-    names = tuple(p for p in profile.split(",") if p)
+    names = _names(profile)
     for name in names:
         with_profile(Config(), name)  # an unknown profile fails here, before any run
     console = Console(stderr=True)
@@ -462,7 +467,7 @@ def bench_explore(
                 )
 
         res = eb.run(
-            [w for w in worlds.split(",") if w],
+            list(_names(worlds)),
             [int(r) for r in robots.split(",") if r],
             seeds,
             nearest,
@@ -679,7 +684,7 @@ def bench_faults(
 
     with Console(stderr=True).status("faults") as status:
         res = faults.run(
-            tuple(w for w in worlds.split(",") if w),
+            _names(worlds),
             seeds,
             robots,
             wall_limit,
@@ -803,10 +808,10 @@ def bench_merge(
 
     with Console(stderr=True).status("merge") as status:
         res = merge.run(
-            tuple(w for w in worlds.split(",") if w),
+            _names(worlds),
             seeds,
             robots,
-            tuple(p for p in profile.split(",") if p),
+            _names(profile),
             lambda what: status.update(f"merge: {what}"),
             jobs,
         )
@@ -885,7 +890,7 @@ def bench_cycle(
 
     with Console(stderr=True).status("cycle") as status:
         res = cycle.run(
-            tuple(w for w in worlds.split(",") if w),
+            _names(worlds),
             robots,
             sim_time,
             seed,
