@@ -286,6 +286,9 @@ class SlamConfig:
     # the loop closed (ACES, real odometry: 58 % ghost walls -> 0.8 %). The cost: one
     # correction's p95 is 0.4-1.6 s on the logs (polyswarm bench slam)
     map_follows_graph: bool = True
+    # the odometry's distance scale (a wheel radius off) is learnt from keyframes ICP
+    # pinned down and corrected where ICP keeps the odometry (polyswarm.odomscale)
+    learn_odometry_scale: bool = True
     obstacle_max_gap_m: float = positive(0.5, 100.0)  # points farther apart: a frontier...
     obstacle_gap_beams: float = num(4.0, 0.0, 1000.0)  # ...unless this many beam spacings
     # rebuild_map (offline runs, after loop closures) merges this many consecutive

@@ -38,6 +38,7 @@ from polyswarm.icp import IcpResult, PointToVectorIcp
 from polyswarm.keyframe import keyframe_polygon
 from polyswarm.loopsearch import correlative_search
 from polyswarm.mapmatch import transform_map
+from polyswarm.odomscale import OdometryScale
 from polyswarm.polymap import (
     UNITS_PER_M,
     GridPolyMap,
@@ -151,6 +152,8 @@ class PolySlam:
         self.selector = KeyframeSelector(cfg.keyframe_distance_m, cfg.keyframe_angle_rad)
         self._kf_pose: np.ndarray | None = None  # map-frame pose at the last keyframe
         self._kf_odom: np.ndarray | None = None
+        self._kf_pinned = False  # ICP pinned the last keyframe down in every direction
+        self.odometry_scale = OdometryScale()  # the odometry's distance scale, learnt
         self.merge_options = MergeOptions(
             cfg.min_growth_m,
             cfg.obstacle_snap_m,
@@ -202,6 +205,7 @@ class PolySlam:
         self.graph = PoseGraph()
         self._steps = []
         self._kf_pose = self._kf_odom = None
+        self._kf_pinned = False
         if odom is not None:
             self._kf_pose, self._kf_odom = self.pose.copy(), np.array(odom, dtype=float)
         self.odom = self._kf_odom
@@ -250,7 +254,7 @@ class PolySlam:
         pred = (
             self.pose
             if self._kf_pose is None
-            else compose(self._kf_pose, relative(self._kf_odom, odom))
+            else compose(self._kf_pose, self._odometry_step(odom))
         )
         t = {"start": time.perf_counter()}
         m = self.cfg.mount
@@ -286,6 +290,7 @@ class PolySlam:
             res = self._align(valid, pred, points.origin)
             pose = res.pose if res.inliers > 0 else pred
             self.degenerate_keyframes += res.degenerate_axis is not None
+        pinned = self._learn_scale(res, odom, len(valid))
         t["icp"] = time.perf_counter()
         # 4b. pose graph: this keyframe's node, its tracking edge, and a loop edge when
         # the scan also matches an old part of the map
@@ -341,6 +346,7 @@ class PolySlam:
         delta = self.map.delta_since(base) if self.map.version != base else None
         self.pose = np.array([pose[0], pose[1], float(wrap(pose[2]))])
         self._kf_pose, self._kf_odom = self.pose.copy(), odom
+        self._kf_pinned = pinned
         self.odom = odom
         self.selector.mark(odom)
         self._keyframe_requested = False
@@ -366,6 +372,28 @@ class PolySlam:
         back = points.origin + rel[keep] * (1.0 - NOVELTY_PULL_M / d[keep])[:, None]
         unknown = ~self.map.is_free_many(transform_points(pose, back))
         return bool(unknown.mean() >= self.cfg.keyframe_novelty)
+
+    # -- the odometry's scale -------------------------------------------------------------
+
+    def _odometry_step(self, odom: np.ndarray) -> np.ndarray:
+        """The odometry's motion since the last keyframe, its distance scale corrected."""
+        step = relative(self._kf_odom, odom)
+        return self.odometry_scale.correct(step) if self.cfg.learn_odometry_scale else step
+
+    def _learn_scale(self, res: IcpResult | None, odom: np.ndarray, n_points: int) -> bool:
+        """Did ICP pin this keyframe down in every direction? If the last one was pinned
+        too, the motion between them is a measure of the odometry's scale."""
+        pinned = bool(
+            res is not None
+            and res.converged
+            and res.degenerate_axis is None
+            and res.inliers >= POOR_FIT_SHARE * n_points
+        )
+        if pinned and self._kf_pinned and self._kf_pose is not None:
+            self.odometry_scale.add(
+                relative(self._kf_odom, odom)[:2], relative(self._kf_pose, res.pose)[:2]
+            )
+        return pinned
 
     # -- stage 4's reference and the pose graph ------------------------------------------
 

@@ -333,6 +333,8 @@ def metrics(run: SlamRun) -> dict:
         "keyframe_stage_ms": stage_percentiles(run.stage_ms),
         "realtime_factor": run.stream_s / run.processing_s if run.processing_s > 0 else math.inf,
         "degenerate_keyframes": run.slam.degenerate_keyframes,
+        # the odometry's distance scale PolySLAM learnt (polyswarm.odomscale)
+        "odometry_scale": run.slam.odometry_scale.scale,
         "rejected_keyframes": run.slam.rejected_keyframes,
         **run.info,
     }
