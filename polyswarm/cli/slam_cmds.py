@@ -126,6 +126,7 @@ def slam_cmd(
         ]
     rows += [
         ("loops closed", str(m["loops_closed"])),
+        ("odometry distance scale learnt", f"{m['odometry_scale']:.4f}"),
         ("keyframes, p95 time", f"{m['keyframes']}, {m['keyframe_p95_ms']:.1f} ms"),
         ("faster than real time", f"{m['realtime_factor']:.1f} x"),
         ("map vectors / polygons", f"{m['vectors']} / {m['polygons']}"),
