@@ -9,7 +9,7 @@ Every run is made twice, ``slam.learn_odometry_scale`` off and on, on two proces
     python examples/odometry_scale_side_by_side.py logs runs.jsonl '*.log.gz'
     # medians and worst cases of the runs, per world/log and profile, into a result file
     python examples/odometry_scale_side_by_side.py summary runs.jsonl \
-        docs/results/odometry-scale.json
+        docs/results/odometry-scale.json [CODE_VERSION of the runs; default: git describe]
 
 Each line of the runs file is one run: what it was and its ``polyswarm.runners.slam``
 metrics (ATE of the optimised and the online trajectory, map IoU against the world).
@@ -80,7 +80,7 @@ def _specs(argv: list[str]) -> list[tuple]:
     ]
 
 
-def summary(runs_path: str, out_path: str) -> None:
+def summary(runs_path: str, out_path: str, version: str = "") -> None:
     rows = [json.loads(line) for line in Path(runs_path).read_text().splitlines()]
     groups: dict = {}
     for r in rows:
@@ -104,16 +104,17 @@ def summary(runs_path: str, out_path: str) -> None:
                 entry[f"{k}_{side}"] = {"median": statistics.median(vals), "worst": worst}
         entry["scale_learnt"] = [g["on"][s]["scale"] for s in seeds]
         out[key] = entry
-    version = subprocess.run(
-        ["git", "describe", "--always", "--dirty"], check=False, capture_output=True, text=True
-    ).stdout.strip()
+    if not version:
+        describe = ["git", "describe", "--always", "--dirty"]
+        version = subprocess.run(describe, check=False, capture_output=True, text=True).stdout
+    version = version.strip()
     meta = {"code_version": version, "runs": runs_path, "date": time.strftime("%Y-%m-%d")}
     Path(out_path).write_text(json.dumps({"groups": out, "meta": meta}, indent=1) + "\n")
 
 
 def main(argv: list[str]) -> None:
     if argv[0] == "summary":
-        summary(argv[1], argv[2])
+        summary(*argv[1:4])
         return
     with mp.Pool(2) as pool, open(argv[1], "a") as f:
         for res in pool.imap_unordered(_run, _specs(argv)):
