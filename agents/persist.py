@@ -27,6 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from polyswarm.errors import PolyswarmError
+from polyswarm.odomscale import OdometryScale
 from polyswarm.polymap import GridPolyMap
 from protocols.mapcodec import decode_any_map, decode_delta, encode_cells_map
 
@@ -75,45 +76,57 @@ def agent_paths(state_dir: str | Path, robot_id: str) -> tuple[Path, Path, Path]
 
 class SavedAgent(NamedTuple):
     """What an agent resumes from: its map, its last pose in the map frame, the robot
-    base's odometry reading at that pose (None in state written without it), and the
-    last anchor it applied (0: none; ``agents.anchoring``)."""
+    base's odometry reading at that pose (None in state written without it), the last
+    anchor it applied (0: none; ``agents.anchoring``) and the odometry's distance scale
+    its SLAM had learnt (None: none saved)."""
 
     map: GridPolyMap
     pose: np.ndarray
     odom: np.ndarray | None
     frame: int = 0
+    scale: OdometryScale | None = None
 
 
 def _write_meta(
-    meta_path: Path, robot_id: str, pose, version: int, odom=None, frame: int = 0
+    meta_path: Path, robot_id: str, pose, version: int, odom=None, frame: int = 0, scale=None
 ) -> None:
     meta = {"robot": robot_id, "pose": [float(v) for v in pose], "map_version": version}
     if odom is not None:
         meta["odom"] = [float(v) for v in odom]
     if frame:
         meta["frame"] = int(frame)
+    if scale is not None:
+        meta["odometry_scale"] = scale.state()
     _atomic_write(meta_path, json.dumps(meta).encode())
 
 
 def save_agent(
-    state_dir: str | Path, robot_id: str, pmap: GridPolyMap, pose, odom=None, frame: int = 0
+    state_dir: str | Path,
+    robot_id: str,
+    pmap: GridPolyMap,
+    pose,
+    odom=None,
+    frame: int = 0,
+    scale: OdometryScale | None = None,
 ) -> None:
     """A snapshot of the whole map and the pose; the journal starts empty again.
 
     ``odom``: the robot base's odometry at ``pose``. The base keeps counting while the
     agent is down, so a restarted agent predicts where the robot went since. ``frame``:
-    the last anchor applied (the map and pose are in the shared frame since)."""
+    the last anchor applied (the map and pose are in the shared frame since). ``scale``:
+    the odometry's distance scale SLAM learnt (a restarted agent keeps it)."""
     map_path, meta_path, journal = agent_paths(state_dir, robot_id)
     save_map(map_path, pmap)
-    _write_meta(meta_path, robot_id, pose, pmap.version, odom, frame)
+    _write_meta(meta_path, robot_id, pose, pmap.version, odom, frame, scale)
     journal.unlink(missing_ok=True)
 
 
 def save_pose(
-    state_dir: str | Path, robot_id: str, pose, version: int, odom=None, frame: int = 0
+    state_dir: str | Path, robot_id: str, pose, version: int, odom=None, frame=0, scale=None
 ) -> None:
     """The last pose only (shutdown: the map is already on disk, snapshot plus journal)."""
-    _write_meta(agent_paths(state_dir, robot_id)[1], robot_id, pose, version, odom, frame)
+    meta_path = agent_paths(state_dir, robot_id)[1]
+    _write_meta(meta_path, robot_id, pose, version, odom, frame, scale)
 
 
 def _append(journal: Path, delta_bytes: bytes) -> None:
@@ -126,12 +139,19 @@ def _append(journal: Path, delta_bytes: bytes) -> None:
 
 
 def journal_delta(
-    state_dir: str | Path, robot_id: str, delta_bytes: bytes, pose, version, odom=None, frame=0
+    state_dir: str | Path,
+    robot_id: str,
+    delta_bytes: bytes,
+    pose,
+    version,
+    odom=None,
+    frame=0,
+    scale=None,
 ) -> None:
     """Append one encoded delta of the agent's map to its journal, and its pose."""
     _, meta_path, journal = agent_paths(state_dir, robot_id)
     _append(journal, delta_bytes)
-    _write_meta(meta_path, robot_id, pose, version, odom, frame)
+    _write_meta(meta_path, robot_id, pose, version, odom, frame, scale)
 
 
 def _replay_journal(journal: Path, pmap: GridPolyMap) -> GridPolyMap:
@@ -179,7 +199,19 @@ def load_agent(state_dir: str | Path, robot_id: str) -> SavedAgent | None:
     except (ValueError, KeyError, TypeError, OSError) as e:
         _set_aside(meta_path, e)
         return None
-    return SavedAgent(pmap, pose, odom, frame)
+    return SavedAgent(pmap, pose, odom, frame, _scale(meta, meta_path))
+
+
+def _scale(meta: dict, meta_path: Path) -> OdometryScale | None:
+    """The saved odometry scale; a bad one is dropped (learnt again), not the pose."""
+    state = meta.get("odometry_scale")
+    if state is None:
+        return None
+    try:
+        return OdometryScale.from_state(state)
+    except ValueError as e:
+        log.warning("%s: %s; the odometry scale is learnt again", meta_path, e)
+        return None
 
 
 def coordinator_paths(state_dir: str | Path) -> tuple[Path, Path]:

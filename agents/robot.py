@@ -185,11 +185,12 @@ class RobotAgent:
             self.stats.distance_m += float(np.hypot(*(pose[:2] - self._last_odom_xy)))
         self._last_odom_xy = pose[:2]
 
-    def resume(self, pmap: GridPolyMap, pose, odom=None, frame: int = 0) -> None:
+    def resume(self, pmap: GridPolyMap, pose, odom=None, frame: int = 0, scale=None) -> None:
         """Continue from a persisted map and pose (the agent was restarted); ``odom``, the
         odometry reading at that pose, lets SLAM follow the robot's motion since;
-        ``frame``, the last anchor applied (the map is in the shared frame since)."""
-        self.slam.resume(pmap, pose, odom)
+        ``frame``, the last anchor applied (the map is in the shared frame since);
+        ``scale``, the odometry's distance scale SLAM had learnt."""
+        self.slam.resume(pmap, pose, odom, scale)
         self.pose = np.array(pose, dtype=float)
         self.frame = max(self.frame, frame)
 
@@ -597,6 +598,7 @@ def run_agent(
                     agent.slam.map.version,
                     agent.slam.odom,
                     agent.frame,
+                    agent.slam.odometry_scale,
                 )
     return agent
 
@@ -613,7 +615,13 @@ def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -
         # on disk before anyone has seen it: a restart never reuses a published version
         if agent.journaled == 0 or agent.journaled >= persist.SNAPSHOT_EVERY:
             persist.save_agent(
-                state_dir, agent.id, agent.slam.map, agent.pose, agent.slam.odom, agent.frame
+                state_dir,
+                agent.id,
+                agent.slam.map,
+                agent.pose,
+                agent.slam.odom,
+                agent.frame,
+                agent.slam.odometry_scale,
             )
             agent.journaled = 1
         else:
@@ -625,6 +633,7 @@ def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -
                 out.delta.version,
                 agent.slam.odom,
                 agent.frame,
+                agent.slam.odometry_scale,
             )
             agent.journaled += 1
     _send(bus, me, agent, out, item.stamp_s, item.seq, sink, wire)

@@ -84,6 +84,32 @@ class OdometryScale:
             log.info("odometry distance scale %.4f (%d keyframe pairs)", s, self.pairs)
             self._logged = s
 
+    def state(self) -> dict:
+        """What the estimate is made of (an agent persists it: a restarted agent keeps its
+        robot's calibration)."""
+        return {
+            "num": self._num,
+            "den": self._den,
+            "sq": self._sq,
+            "n": self._n,
+            "pairs": self.pairs,
+        }
+
+    @classmethod
+    def from_state(cls, state: dict) -> OdometryScale:
+        """The estimate ``state()`` described; ValueError if it is not one."""
+        out = cls()
+        try:
+            num, den, sq, n = (float(state[k]) for k in ("num", "den", "sq", "n"))
+            pairs = int(state["pairs"])
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"bad odometry scale state {state!r}") from e
+        if not all(math.isfinite(v) for v in (num, den, sq, n)) or min(den, sq, n, pairs) < 0:
+            raise ValueError(f"bad odometry scale state {state!r}")
+        out._num, out._den, out._sq, out._n, out.pairs = num, den, sq, n, pairs
+        out._logged = out.scale
+        return out
+
     @property
     def sigma_m(self) -> float:
         """The random error of one pair's odometry (m), from the residuals so far."""

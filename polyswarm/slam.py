@@ -184,17 +184,20 @@ class PolySlam:
         self._anchor_base: int | None = None  # the map's version before that move
         self.anchors = 0  # frames moved into
 
-    def resume(self, pmap: GridPolyMap, pose, odom=None) -> None:
+    def resume(self, pmap: GridPolyMap, pose, odom=None, scale: OdometryScale | None = None):
         """Continue on a persisted map from the last known pose (an agent restarted): the
         next scan is a keyframe aligned against that map. ``odom`` is the odometry reading
         at ``pose``: the robot base counts on while the agent is down, so the robot's motion
-        since is predicted from it. Without it the robot is taken to stand at ``pose``."""
+        since is predicted from it. Without it the robot is taken to stand at ``pose``.
+        ``scale``: the odometry's distance scale learnt before (else it is learnt again)."""
         if abs(pmap.cell_size - self.map.cell_size) > 1e-9:
             raise PolyswarmError(
                 f"persisted map has {pmap.cell_size} m cells, the config {self.map.cell_size} m"
             )
         self.map = pmap
         self.pose = np.array(pose, dtype=float)
+        if scale is not None:
+            self.odometry_scale = scale
         sub = self.cfg.submap  # the keyframes are not persisted: match the map until new ones
         self.store = KeyframeStore(sub.keyframes, sub.radius_m, sub.recent)
         # the map holds keyframes the store does not: rebuilding cells from the store

@@ -155,17 +155,45 @@ def test_agent_state_is_a_snapshot_plus_a_journal_of_deltas(tmp_path):
     persist.journal_delta(tmp_path, "r1", encode_delta(b.delta_since(a.version)), (3, 1, 0), 2)
     wire = encode_delta(c.delta_since(b.version))
     persist.journal_delta(tmp_path, "r1", wire, (6, 1, 0), 3, odom=(5.5, 0.2, 0.1), frame=1)
-    pmap, pose, odom, frame = persist.load_agent(tmp_path, "r1")
+    pmap, pose, odom, frame, scale = persist.load_agent(tmp_path, "r1")
     assert pmap.version == c.version and pmap.explored_area() == pytest.approx(c.explored_area())
     assert list(pose) == [6, 1, 0]
     assert list(odom) == [5.5, 0.2, 0.1]  # the base's reading there: motion since is followed
     assert frame == 1  # anchored: a restarted agent stays in the shared frame
+    assert scale is None  # none saved: learnt again
     journal = tmp_path / "r1.journal"
     journal.write_bytes(journal.read_bytes()[:-5])  # a crash in the middle of the last write
     pmap = persist.load_agent(tmp_path, "r1").map
     assert pmap.version == b.version  # the torn delta is lost, the others are not
     persist.save_agent(tmp_path, "r1", c, (6, 1, 0))
     assert not journal.exists()
+
+
+def test_a_restarted_agent_keeps_its_odometry_scale(tmp_path, caplog):
+    """The wheel scale SLAM learnt is saved with the pose; a damaged one is dropped with a
+    log line, and the map and pose still resume."""
+    import json
+
+    from agents import persist
+    from polyswarm.odomscale import OdometryScale
+    from polyswarm.polymap import GridPolyMap
+    from tests.conftest import F, O, rect
+
+    learnt = OdometryScale()
+    for _ in range(100):
+        learnt.add((0.4, 0.0), (0.412, 0.0))  # a wheel reporting 3 % short
+    a = GridPolyMap(2.0).merge(rect(0.5, 0.5, 3.0, 1.5, (O, F, O, O))).map
+    persist.save_agent(tmp_path, "r1", a, (1.0, 1.0, 0.0), scale=learnt)
+    saved = persist.load_agent(tmp_path, "r1")
+    assert saved.scale is not None and saved.scale.scale == pytest.approx(learnt.scale)
+    assert saved.scale.pairs == 100
+    meta = tmp_path / "r1.json"
+    bad = json.loads(meta.read_text())
+    bad["odometry_scale"]["den"] = -1.0
+    meta.write_text(json.dumps(bad))
+    saved = persist.load_agent(tmp_path, "r1")
+    assert saved is not None and saved.scale is None and list(saved.pose) == [1, 1, 0]
+    assert "learnt again" in caplog.text
 
 
 def test_coordinator_state_is_journaled_as_it_changes(tmp_path, monkeypatch):

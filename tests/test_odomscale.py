@@ -80,3 +80,14 @@ def test_slam_learns_the_scale_of_a_simulated_robots_wheels():
     ratio = true_path / odo_path
     assert abs(ratio - 1.0) > 0.01  # the wheels really are off
     assert run.slam.odometry_scale.scale == pytest.approx(ratio, abs=0.005)
+
+
+def test_the_state_round_trips_and_bad_state_is_refused():
+    s = OdometryScale()
+    for odo, icp in _steps(np.random.default_rng(2), 50, 0.98, 0.01):
+        s.add(odo, icp)
+    again = OdometryScale.from_state(s.state())
+    assert again.scale == s.scale and again.sigma_m == s.sigma_m and again.pairs == 50
+    for bad in ({}, {**s.state(), "num": float("nan")}, {**s.state(), "n": -1}, None):
+        with pytest.raises(ValueError):
+            OdometryScale.from_state(bad)
