@@ -184,7 +184,9 @@ class PolySlam:
         self._anchor_base: int | None = None  # the map's version before that move
         self.anchors = 0  # frames moved into
 
-    def resume(self, pmap: GridPolyMap, pose, odom=None, scale: OdometryScale | None = None):
+    def resume(
+        self, pmap: GridPolyMap, pose, odom=None, scale: OdometryScale | None = None
+    ) -> None:
         """Continue on a persisted map from the last known pose (an agent restarted): the
         next scan is a keyframe aligned against that map. ``odom`` is the odometry reading
         at ``pose``: the robot base counts on while the agent is down, so the robot's motion
