@@ -21,7 +21,6 @@ import itertools
 import json
 import multiprocessing as mp
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -70,11 +69,12 @@ def _specs(argv: list[str]) -> list[tuple]:
             for w, p, s in itertools.product(worlds, profiles, seeds)
             for learn in (False, True)
         ]
-    from polyswarm.data import shared_data_dir
+    from polyswarm.data import log_paths
 
     return [
         ("log", str(log), odo, 0, learn)
-        for log in sorted((shared_data_dir() / "logs").glob(argv[2]))
+        for log in log_paths()
+        if log.match(argv[2])
         for odo in ("log", "noise")
         for learn in (False, True)
     ]
@@ -104,11 +104,11 @@ def summary(runs_path: str, out_path: str, version: str = "") -> None:
                 entry[f"{k}_{side}"] = {"median": statistics.median(vals), "worst": worst}
         entry["scale_learnt"] = [g["on"][s]["scale"] for s in seeds]
         out[key] = entry
-    if not version:
-        describe = ["git", "describe", "--always", "--dirty"]
-        version = subprocess.run(describe, check=False, capture_output=True, text=True).stdout
-    version = version.strip()
-    meta = {"code_version": version, "runs": runs_path, "date": time.strftime("%Y-%m-%d")}
+    from polyswarm.benchmarks.results import machine_meta
+
+    meta = machine_meta() | {"command": " ".join(["python", *sys.argv]), "runs": runs_path}
+    if version:  # the runs were made before this summary, at this code
+        meta["code_version"] = version
     Path(out_path).write_text(json.dumps({"groups": out, "meta": meta}, indent=1) + "\n")
 
 
