@@ -9,8 +9,10 @@
    radius - grown by circumscribed polygons, so the clearance is never less; the two
    pieces at a tight passage keep the tight radius) is triangulated. Start and goal may
    be closer (the robot is there; a frontier goal lies at the frontier): they join the
-   nearest point of that space. If the space is cut, the opening into the first piece
-   the start cannot reach is blocked and A* tries again.
+   nearest point of that space. If the space is cut, the check is repeated with every
+   piece of the cells the route crosses (a cell fanned into slivers); if it is still
+   cut, the opening into the first piece the start cannot reach is blocked and A*
+   tries again.
 3. A* over the triangles and the funnel algorithm (string pulling through the shared
    edges) give the shortest path inside the sleeve: taut, and at least the radius from
    every obstacle vector. The thesis' paths went from polygon centre to polygon centre
@@ -95,24 +97,26 @@ class Planner:
         s_node = node_of(self.map, *start)
         sources = self._entries(s_node, start)
         if s_node is None and not sources:
-            raise PlanningError(f"start {tuple(start)} is not in explored free space")
+            raise PlanningError(f"start {_xy(start)} is not in explored free space")
         g_node = node_of(self.map, *goal)
         if g_node is None:
-            raise PlanningError(f"goal {tuple(goal)} is in unexplored space (or in an obstacle)")
+            raise PlanningError(f"goal {_xy(goal)} is in unexplored space (or in an obstacle)")
         targets = self._entries(g_node, goal)
         if not sources or not targets:
             where = "start" if not sources else "goal"
-            raise PlanningError(f"no room for radius {self.radius} m near the {where}")
+            raise PlanningError(f"no room for radius {self.radius:.3f} m near the {where}")
         blocked: set[tuple[NodeId, NodeId]] = set()
         expansions = 0
         nearest: Path | None = None  # of the sleeves tried, the path nearest the goal
-        why = f"no path from {tuple(start)} to {tuple(goal)} for radius {self.radius} m"
+        why = f"no path from {_xy(start)} to {_xy(goal)} for radius {self.radius:.3f} m"
         for _ in range(MAX_SLEEVE_RETRIES + 1):
             nodes, n_exp = self._astar(sources, targets, goal, blocked)
             expansions += n_exp
             if nodes is None:
                 break
             sleeve = self._taut(nodes, start, goal, (s_node, g_node))
+            if sleeve.path is None:  # cut: perhaps only the route's pieces are too thin
+                sleeve = self._taut(nodes, start, goal, (s_node, g_node), widen=True)
             if sleeve.path is not None:
                 return Path(sleeve.path, tuple(nodes), expansions)
             blocked |= sleeve.cut
@@ -120,7 +124,7 @@ class Planner:
                 nearest is None or _gap(sleeve.towards, goal) < _gap(nearest.points, goal)
             ):
                 nearest = Path(sleeve.towards, tuple(nodes), expansions, reaches_goal=False)
-            why = f"no path with {self.radius} m clearance from {tuple(start)} to {tuple(goal)}"
+            why = f"no path with {self.radius:.3f} m clearance from {_xy(start)} to {_xy(goal)}"
         if (
             partial
             and nearest is not None
@@ -189,9 +193,19 @@ class Planner:
 
     # -- 2./3. the taut path in the sleeve ------------------------------------------------
 
-    def _taut(self, nodes, start, goal, ends=()) -> _Sleeve:
+    def _taut(self, nodes, start, goal, ends=(), widen: bool = False) -> _Sleeve:
+        """The exact check of one A* route. ``widen``: every piece of the cells the route
+        crosses joins the sleeve - a convex partition can fan a cell's free space into
+        slivers from one corner, and a route along slivers has no room for the radius
+        where the cell has plenty (a door reached along a 0.3 m sliver of a 2 m
+        corridor)."""
         # the start's and goal's pieces too (a start in an unexplored sliver has none)
         pieces = list(dict.fromkeys([*nodes, *(e for e in ends if e is not None)]))
+        if widen:
+            for c in dict.fromkeys(n[:2] for n in nodes):
+                cg = self.graph.cells.get(c)
+                pieces += [] if cg is None else list(cg.nodes)
+            pieces = list(dict.fromkeys(pieces))
         polys = [shapely.Polygon(piece_polygon(self.map, n)) for n in pieces]
         sleeve = shapely.union_all(polys, grid_size=1e-6)
         x0, y0, x1, y1 = sleeve.bounds
@@ -305,6 +319,11 @@ def _with_ends(tri_pts, start, s_eff, goal, g_eff) -> np.ndarray:
     if np.hypot(*(goal - g_eff)) > 1e-9:
         pts.append(goal)
     return _dedupe(np.array(pts))
+
+
+def _xy(p) -> str:
+    """A point for a message: ``(15.74, 8.15)`` (metres)."""
+    return f"({p[0]:.2f}, {p[1]:.2f})"
 
 
 def _gap(points: np.ndarray, goal: np.ndarray) -> float:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from polyswarm.errors import PlanningError
 from polyswarm.navgraph import NavGraph
 from polyswarm.planner import Planner, path_clearance
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
+from protocols.mapcodec import decode_map
 from tests.conftest import O
 
 R = 0.25
@@ -298,3 +300,24 @@ def test_the_fallback_path_keeps_only_the_corners_it_needs_and_stays_inside():
     assert corridor.covers(shapely.LineString(path))
     assert np.allclose(path[0], (1, 1)) and np.allclose(path[-1], (9, 9))
     assert 3 <= len(path) < len(mids)
+
+
+def test_a_door_reached_along_slivers_of_a_fanned_cell_is_passable():
+    """A TurtleBot3 office map (tests/fixtures, 10 cells cropped from a coordinator's
+    merged map): the corridor cell below a 0.7 m door is partitioned into a fan of thin
+    triangles from its corner at (16, 8). The route's own slivers left no room for the
+    0.205 m radius, so the planner found no path, the robot reported the frontier
+    past the door unreachable twice, the coordinator blacklisted it and ended the
+    mission at 90 %. The cell has plenty of room: the path goes through the door."""
+    data = (Path(__file__).parent / "fixtures" / "office_door_slivers.polymap").read_bytes()
+    pmap = decode_map(data)
+    graph = NavGraph.build(pmap, 0.205, frontier_radius=0.1, tight_radius=0.135)
+    start, goal = np.array([15.74, 8.15]), np.array([17.91, 9.10])
+    path = Planner(pmap, graph).plan(start, goal)
+    assert path.reaches_goal and np.allclose(path.points[-1], goal)
+    # through the door: the map's walls end at x 16.98 and 17.80 on y 8.5 (its left
+    # jamb is not mapped yet), keeping the radius from every wall
+    crossing = np.interp(8.5, path.points[:, 1], path.points[:, 0])
+    assert 16.98 + 0.205 <= crossing <= 17.80 - 0.205, crossing
+    assert path_clearance(path.points, *obstacles(pmap)) >= 0.205 - 1e-6
+    assert path.length_m < np.hypot(*(goal - start)) + 0.5
