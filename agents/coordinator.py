@@ -14,8 +14,9 @@ a robot reached or failed its target, joined or left):
      whose frontier is still there after the robot looked at it is blacklisted after
      ``blacklist_after_looks`` such looks;
   5. mission end: no reachable target for ``end_confirm_s`` and ``END_CONFIRM_CYCLES``
-     cycles in a row, with every robot's map merged -> robots return to their start
-     poses -> done.
+     cycles in a row, with every robot's map merged -> the blacklisted targets get one
+     more round if the map grew since their last (``RETRY_GROWTH_M2``) -> robots return
+     to their start poses -> done.
 Robot map deltas are applied to that robot's copy of its map as they arrive (a gap
 fetches the robot's full map); the changed cells of all robots are merged into the
 global map in one batch (``flush``) every ``MERGE_PERIOD_S`` and before each cycle, so
@@ -95,6 +96,12 @@ MERGE_PERIOD_S = 1.0  # robots' changed cells are merged at least this often (ba
 # frontiers were blacklisted after one look each and the mission ended at 29 %
 LOOK_MOVED_M = 0.25
 LOOK_OPEN_SHARE = 0.5
+# before the exploration ends, the blacklisted frontiers get one more round if the
+# explored area grew by this much since their last round (or never had one): a failure
+# may have been the map's of its time, not the frontier's. Two TurtleBot3 office runs
+# ended at 77 % and 90 % after one frontier each failed twice; each round must be paid
+# for by new explored space, so rounds cannot repeat for ever
+RETRY_GROWTH_M2 = 2.0
 
 
 @dataclass
@@ -153,6 +160,7 @@ class Coordinator:
         self.failures: dict[int, float] = {}
         self.looks: dict[int, int] = {}  # target id -> looks from its goal that left it open
         self.blacklist: list[np.ndarray] = []
+        self._retried_at_m2 = -math.inf  # explored area at the blacklist's last retry
         self.state = MissionState.STARTING
         self._no_target_since: float | None = None
         self._no_target_cycles = 0
@@ -498,6 +506,7 @@ class Coordinator:
                         self.now - self._no_target_since >= self.cfg.explore.end_confirm_s
                         and self._no_target_cycles >= END_CONFIRM_CYCLES
                         and not self._waiting_for_frames()
+                        and not self._retry_blacklisted()
                     ):
                         self._end_exploration(live)
                 else:
@@ -734,6 +743,23 @@ class Coordinator:
             if r.assignment is not None and self.targets.get(r.assignment.target) is t:
                 r.assignment = None
         self._wake = True
+
+    def _retry_blacklisted(self) -> bool:
+        """No frontier left but blacklisted ones: give each one more round (failure counts
+        and looks start afresh), if the explored area grew by ``RETRY_GROWTH_M2`` since
+        their last round. True if they got it."""
+        area = self.merged.explored_area()
+        if not self.blacklist or area < self._retried_at_m2 + RETRY_GROWTH_M2:
+            return False
+        log.info(
+            "no frontier left but %d blacklisted: each gets one more round",
+            len(self.blacklist) // 2,
+        )
+        self._retried_at_m2 = area
+        self.blacklist, self.failures, self.looks = [], {}, {}
+        self._no_target_since, self._no_target_cycles = None, 0
+        self._wake = True
+        return True
 
     def _end_exploration(self, live) -> None:
         self.targets = {}

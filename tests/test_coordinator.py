@@ -235,6 +235,8 @@ def test_a_target_every_robot_stalls_at_is_given_up_in_the_end():
             c.now += 1.0
             c.on_pose("r1", c.now, Pose(1.0, 1.0, 0.0))
             c.cycle()
+            if c.blacklist:
+                break
         c.now += EXCLUDE_S
     assert c.failures[a.target] == 2.0 and c.blacklist  # after four stalls
 
@@ -318,6 +320,43 @@ def test_repeated_failures_blacklist_a_target():
     c.now += 40.0
     c.cycle()
     assert c.targets == {}  # the only frontier is blacklisted
+
+
+def test_blacklisted_frontiers_get_one_more_round_before_the_mission_ends():
+    """A frontier that failed twice (a planner that found no way through a door) ended
+    TurtleBot3 office missions at 77-90 %: before the end, the blacklist is retried once
+    per RETRY_GROWTH_M2 of new explored area; without new area, the mission ends."""
+    c = coordinator(1)
+    feed(c, "r1", corridor_map(open_end=True), 0.1)
+
+    def fail_twice(t0: float) -> float:
+        for k in range(Config().explore.blacklist_after_failures):
+            c.now = t0 + 40.0 * k  # past the exclusion of a failed target
+            if k > 0 or c.robots["r1"].assignment is None:
+                c.cycle()
+            a = c.robots["r1"].assignment
+            assert a is not None and a.kind == AssignmentKind.EXPLORE
+            c.on_status("r1", c.now, RobotStatus(RobotState.NAVIGATING, a.target))
+            c.on_status("r1", c.now, RobotStatus(RobotState.UNREACHABLE, a.target))
+        assert c.blacklist
+        return c.now
+
+    t = fail_twice(1.0)
+    # no target left: after the end's confirmation the blacklist is retried, not ended
+    for _ in range(END_CONFIRM_CYCLES + 2):
+        t += Config().explore.end_confirm_s
+        c.now = t
+        c.cycle()
+    assert c.state == MissionState.EXPLORING and c.blacklist == [] and c.failures == {}
+    a = c.robots["r1"].assignment
+    assert a is not None and a.kind == AssignmentKind.EXPLORE  # the frontier again
+    # it fails twice more; the map has not grown since: now the mission ends
+    t = fail_twice(t)
+    for _ in range(END_CONFIRM_CYCLES + 2):
+        t += Config().explore.end_confirm_s
+        c.now = t
+        c.cycle()
+    assert c.state == MissionState.RETURNING and c.blacklist
 
 
 def test_a_delta_gap_is_refused_and_a_full_map_resyncs():
