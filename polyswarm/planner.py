@@ -10,7 +10,7 @@
    pieces at a tight passage keep the tight radius) is triangulated. Start and goal may
    be closer (the robot is there; a frontier goal lies at the frontier): they join the
    nearest point of that space. If the space is cut, the check is repeated with every
-   piece of the cells the route crosses (a cell fanned into slivers); if it is still
+   piece of the cells around the cut (a cell fanned into slivers); if it is still
    cut, the opening into the first piece the start cannot reach is blocked and A*
    tries again.
 3. A* over the triangles and the funnel algorithm (string pulling through the shared
@@ -115,8 +115,8 @@ class Planner:
             if nodes is None:
                 break
             sleeve = self._taut(nodes, start, goal, (s_node, g_node))
-            if sleeve.path is None:  # cut: perhaps only the route's pieces are too thin
-                sleeve = self._taut(nodes, start, goal, (s_node, g_node), widen=True)
+            if sleeve.cut_cell is not None:  # cut: perhaps only the route's pieces are thin
+                sleeve = self._taut(nodes, start, goal, (s_node, g_node), sleeve.cut_cell)
             if sleeve.path is not None:
                 return Path(sleeve.path, tuple(nodes), expansions)
             blocked |= sleeve.cut
@@ -193,16 +193,18 @@ class Planner:
 
     # -- 2./3. the taut path in the sleeve ------------------------------------------------
 
-    def _taut(self, nodes, start, goal, ends=(), widen: bool = False) -> _Sleeve:
-        """The exact check of one A* route. ``widen``: every piece of the cells the route
-        crosses joins the sleeve - a convex partition can fan a cell's free space into
-        slivers from one corner, and a route along slivers has no room for the radius
-        where the cell has plenty (a door reached along a 0.3 m sliver of a 2 m
-        corridor)."""
+    def _taut(self, nodes, start, goal, ends=(), widen_at=None) -> _Sleeve:
+        """The exact check of one A* route. ``widen_at`` (a cell where the route was
+        cut): every piece of that cell and its eight neighbours joins the sleeve - a
+        convex partition can fan a cell's free space into slivers from one corner, and
+        a route along slivers has no room for the radius where the cell has plenty (a
+        door reached along a 0.3 m sliver of a 2 m corridor). Nine cells at most: the
+        cost does not grow with the route."""
         # the start's and goal's pieces too (a start in an unexplored sliver has none)
         pieces = list(dict.fromkeys([*nodes, *(e for e in ends if e is not None)]))
-        if widen:
-            for c in dict.fromkeys(n[:2] for n in nodes):
+        if widen_at is not None:
+            i, j = widen_at
+            for c in itertools.product((i - 1, i, i + 1), (j - 1, j, j + 1)):
                 cg = self.graph.cells.get(c)
                 pieces += [] if cg is None else list(cg.nodes)
             pieces = list(dict.fromkeys(pieces))
@@ -255,9 +257,13 @@ class Planner:
         if part_g is None or not part_s.equals(part_g):
             # the sleeve is cut by obstacles: block the opening into the first piece of
             # the route the start's part of the free space does not reach
+            k = _first_not_entered(polys[: len(nodes)], part_s)
             return _Sleeve(
-                cut=_cut_opening(self.graph, nodes, polys[: len(nodes)], part_s),
+                cut=_narrowest_openings(self.graph, nodes)
+                if k == 0
+                else {(nodes[k - 1], nodes[k])},
                 towards=self._towards(part_s, s_eff, start, goal),
+                cut_cell=None if k == 0 or widen_at is not None else nodes[k][:2],
             )
         inner = shapely.set_precision(part_s, 1e-6)
         tri_pts = _channel(inner, s_eff, g_eff)
@@ -309,6 +315,7 @@ class _Sleeve:
     path: np.ndarray | None = None
     cut: set = field(default_factory=set)
     towards: np.ndarray | None = None
+    cut_cell: tuple[int, int] | None = None  # where the route was cut (not yet widened)
 
 
 def _with_ends(tri_pts, start, s_eff, goal, g_eff) -> np.ndarray:
@@ -331,14 +338,11 @@ def _gap(points: np.ndarray, goal: np.ndarray) -> float:
     return float(np.hypot(*(points[-1] - goal)))
 
 
-def _cut_opening(graph: NavGraph, nodes, polys, part) -> set:
-    """The opening into the first piece of the route that ``part`` (the start's free
-    space) does not enter; the narrowest opening if it enters them all."""
+def _first_not_entered(polys, part) -> int:
+    """The index of the first piece of the route that ``part`` (the start's free space)
+    does not enter; 0 if it enters them all (then the narrowest opening is blamed)."""
     entered = shapely.area(shapely.intersection(polys, part)) > 1e-6
-    k = int(np.argmin(entered)) if not entered.all() else 0
-    if k == 0:
-        return _narrowest_openings(graph, nodes)
-    return {(nodes[k - 1], nodes[k])}
+    return int(np.argmin(entered)) if not entered.all() else 0
 
 
 def _closest_on_segment(a, b, p, goal) -> np.ndarray:
