@@ -288,10 +288,9 @@ class SlamConfig:
     map_follows_graph: bool = True
     # the odometry's distance scale (a wheel radius off) is learnt from keyframes ICP
     # pinned down and corrected where ICP keeps the odometry (polyswarm.odomscale). Off:
-    # with the TurtleBot3's 3.5 m lidar the learnt scale was up to 1.8 % wrong, and 3-robot
-    # office runs took t99 244, 227, 226 s with it against 215, 196, 222 s without
-    # (docs/slam-log.md); on in the thesis-noisy-odometry profile, where the 30 m lidar
-    # makes it right to 0.5 %
+    # with the TurtleBot3's 3.5 m lidar the learnt scale was up to 1.8 % wrong and 3-robot
+    # office runs gained nothing measurable (docs/slam-log.md); on in the
+    # thesis-noisy-odometry profile, where the 30 m lidar makes it right to 0.5 %
     learn_odometry_scale: bool = False
     obstacle_max_gap_m: float = positive(0.5, 100.0)  # points farther apart: a frontier...
     obstacle_gap_beams: float = num(4.0, 0.0, 1000.0)  # ...unless this many beam spacings
