@@ -16,8 +16,8 @@ off), with each pair weighed by the odometry's own random error (learnt from the
 residuals): s = (sum(icp . odo) + lam) / (sum(odo . odo) + lam), lam = sigma^2 / prior^2.
 Old pairs are forgotten over ``MEMORY_M`` of travel. With ``slam.learn_odometry_scale``
 PolySLAM multiplies the odometry's distances by it when predicting a pose. It is off by
-default: with the TurtleBot3's 3.5 m lidar the estimate was up to 1.8 % wrong and made
-3-robot explorations worse (``polyswarm.config`` says how much); the
+default: with the TurtleBot3's 3.5 m lidar the estimate was up to 1.8 % wrong and
+3-robot explorations gained nothing measurable (``docs/slam-log.md``); the
 ``thesis-noisy-odometry`` profile turns it on.
 
     scale = OdometryScale()

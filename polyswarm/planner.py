@@ -193,7 +193,9 @@ class Planner:
 
     # -- 2./3. the taut path in the sleeve ------------------------------------------------
 
-    def _taut(self, nodes, start, goal, ends=(), widen_at=None) -> _Sleeve:
+    def _taut(
+        self, nodes, start, goal, ends=(), widen_at: tuple[int, int] | None = None
+    ) -> _Sleeve:
         """The exact check of one A* route. ``widen_at`` (a cell where the route was
         cut): every piece of that cell and its eight neighbours joins the sleeve - a
         convex partition can fan a cell's free space into slivers from one corner, and
