@@ -9,6 +9,10 @@ Until the coordinator knows where that frame lies in the shared map frame:
 * every ``MATCH_PERIOD_S`` its map is matched with the merged map
   (``polyswarm.mapmatch.match_maps``, in a worker thread: a match takes 0.3-2.5 s), and
   every match, accepted or not, is logged with its evidence;
+* a match's candidate poses that the robots' sightings contradict are left out
+  (``polyswarm.sighting``: the frame would put one robot where another's lidar looked
+  and saw nothing); in a symmetric building that is what tells the truth from its
+  rotated images;
 * once successive matches agree (``FrameEstimate``), the robot is sent an ``anchor``:
   the pose of its frame in the shared frame. It moves its pose graph, keyframes and pose
   by it; its map follows as a correction of every keyframe, which its solo coordinator
@@ -32,7 +36,8 @@ import numpy as np
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
 from polyswarm.mapmatch import FrameEstimate, MatchError, match_maps
-from protocols.messages import Anchor
+from polyswarm.sighting import MIN_CONTRADICTIONS, Sighting, Track, contradictions
+from protocols.messages import Anchor, Pose
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +75,9 @@ class Anchoring:
             self.waiting[rid] = _Waiting(solo)
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="mapmatch") if unknown else None
         self.anchored: dict[str, np.ndarray] = {}  # robot -> its frame in the shared one
+        # every robot's poses and clear profiles: in the shared frame, or, while it
+        # waits, in its own
+        self.tracks: dict[str, Track] = {}
 
     def owner(self, rid: str, main):
         """The coordinator that takes this robot's messages now."""
@@ -114,7 +122,9 @@ class Anchoring:
                 and main.merged.explored_area() >= MIN_MAP_M2
             ):
                 w.last_match_s = now_s
-                w.matching = self._pool.submit(match_maps, main.merged, own)
+                w.matching = self._pool.submit(
+                    match_maps, main.merged, own, self._contradicts(rid, main)
+                )
         return out
 
     def _took(self, rid: str, w: _Waiting, done: Future) -> None:
@@ -139,6 +149,29 @@ class Anchoring:
         if before is None and w.frames.pose is not None:
             log.info("frame of %s committed after %d matches", rid, w.matches)
 
+    def sighted(self, rid: str, stamp_s: float, pose: Pose) -> None:
+        """A robot's pose, and its scan's clear profile if sent, for the tracks."""
+        if not self.waiting:
+            return  # every frame is known: no evidence is needed
+        if rid in self.waiting and pose.frame != 0:
+            return  # anchored, not yet handed over: between two frames
+        track = self.tracks.setdefault(rid, Track())
+        track.add(Sighting(stamp_s, (pose.x, pose.y, pose.theta), pose.clear))
+
+    def _contradicts(self, rid: str, main):
+        """Whether the sightings so far contradict a frame of ``rid`` (its frame in the
+        shared one): a test on copies of the tracks, for the matching thread."""
+        mine = self.tracks.get(rid)
+        theirs = [self.tracks[o].copy() for o in main.robots if o in self.tracks]
+        if mine is None or not theirs:
+            return None
+        mine = mine.copy()
+
+        def contradicts(frame: np.ndarray) -> bool:
+            return sum(contradictions(t, mine, frame) for t in theirs) >= MIN_CONTRADICTIONS
+
+        return contradicts
+
     def on_pose(self, rid: str, frame: int, map_version: int, main) -> bool:
         """A pose of ``rid`` naming ``frame`` at its map ``map_version``: hands the robot
         over to ``main`` once it names its anchor and its solo coordinator's copy of its
@@ -156,9 +189,12 @@ class Anchoring:
         if w.anchor is None:  # anchored by this coordinator before it restarted
             log.info("robot %s is in the shared frame already (anchor %d)", rid, frame)
             pose = np.zeros(3)  # its start in the shared frame is not known here
+            self.tracks.pop(rid, None)  # poses in a frame not known here either
         else:
             pose = np.array([w.anchor.x, w.anchor.y, w.anchor.theta])
         self.anchored[rid] = pose
+        if rid in self.tracks:  # its poses so far, in the shared frame
+            self.tracks[rid] = self.tracks[rid].moved(pose)
         solo = w.solo.robots[rid]
         info = main.robots[rid] = RobotInfo(rid, pose.copy())  # its start: its frame's origin
         info.alive = solo.alive

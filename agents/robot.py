@@ -35,8 +35,9 @@ from polyswarm.navgraph import NavGraph, clear_of
 from polyswarm.odometry import OdometryBuffer
 from polyswarm.planner import Planner
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, VectorType
-from polyswarm.scan import LaserScan, beam_angles, deskew_motion, scan_to_points
+from polyswarm.scan import LaserScan, beam_angles, classify, deskew_motion, scan_to_points
 from polyswarm.se2 import compose, transform_points
+from polyswarm.sighting import PROFILE_PERIOD_S, clear_profile
 from polyswarm.slam import PolySlam
 from protocols.keys import SwarmKeys, check_name
 from protocols.mapcodec import (
@@ -127,6 +128,10 @@ class RobotAgent:
         self._anchor: Anchor | None = None  # the anchor SLAM applies at the next scan
         # robots whose starts nobody gave: their poses mean nothing here until anchored
         self._own_frames = {rid for rid, st in known_starts(cfg.robots).items() if st is None}
+        self._anchored_peers: set[str] = set()  # of those, the ones whose poses name an anchor
+        # send clear profiles (None: while a robot is in a frame of its own; benchmarks
+        # that know every start but measure the matching set it True)
+        self.sightings: bool | None = None
         lidar = cfg.sim.lidar
         self.slam = PolySlam(
             cfg.slam, cfg.map.cell_size_m, self.start_pose, out_of_range=lidar.out_of_range
@@ -156,6 +161,7 @@ class RobotAgent:
         self.odometry = OdometryBuffer(ODOM_BUFFER)
         self._last_pose_t = -math.inf
         self._last_status_t = -math.inf
+        self._last_clear_t = -math.inf  # the last pose sent with a clear profile
         self._last_odom_xy: np.ndarray | None = None
         self.peers: dict[str, tuple[float, np.ndarray]] = {}  # other robots: (stamp, xy)
         self.stats = AgentStats()
@@ -248,6 +254,8 @@ class RobotAgent:
         self.merged_graph.update(self.merged, {c.index for c in delta.cells})
 
     def on_peer_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
+        if pose.frame:
+            self._anchored_peers.add(rid)
         if rid == self.id or not self.in_shared_frame:
             return
         if rid in self._own_frames and pose.frame == 0:
@@ -295,12 +303,35 @@ class RobotAgent:
         if stamp_s - self._last_pose_t >= POSE_PERIOD_S or step.delta is not None:
             self._last_pose_t = stamp_s
             blocked_by = self.behaviour.blocked_by
-            out.pose = Pose(*map(float, self.pose), self.slam.map.version, blocked_by, self.frame)
+            clear = b""
+            if self._sighting_wanted() and stamp_s - self._last_clear_t >= PROFILE_PERIOD_S:
+                self._last_clear_t = stamp_s
+                clear = self._clear_profile(scan, xy)
+            out.pose = Pose(
+                *map(float, self.pose), self.slam.map.version, blocked_by, self.frame, clear
+            )
         if self.behaviour.changed or stamp_s - self._last_status_t >= STATUS_PERIOD_S:
             self._last_status_t = stamp_s
             self.behaviour.changed = False
             out.status = self.status()
         return out
+
+    def _sighting_wanted(self) -> bool:
+        """Whether a robot of the swarm is still in a frame of its own: the coordinator
+        then wants the clear profiles that tell its frame's images apart."""
+        if self.sightings is not None:
+            return self.sightings
+        own = self._own_frames - self._anchored_peers
+        if self.in_shared_frame:
+            own.discard(self.id)
+        return bool(own)
+
+    def _clear_profile(self, scan: LaserScan, returns: np.ndarray) -> bytes:
+        """``polyswarm.sighting.clear_profile`` of this scan (``returns``: its de-skewed
+        returns in the robot frame)."""
+        valid, no_return, _ = classify(scan, self.cfg.sim.lidar.out_of_range)
+        blind = beam_angles(scan, self._mount())[~valid & ~no_return]
+        return clear_profile(returns, blind)
 
     def _without_peers(self, scan: LaserScan, now_s: float) -> LaserScan:
         """The scan with returns from other robots (within ``PEER_MASK_M`` of a fresh

@@ -28,6 +28,7 @@ asks of successive matches before a robot's map is merged.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -93,14 +94,20 @@ class MapMatch:
     score: float
     candidates: int = field(default=0)
     margin_wall_m: float = 0.0  # wall this pose explains beyond the best other pose
+    # the refined poses with their evidence, best first
+    refined: tuple = field(default=(), repr=False, compare=False)
+    contradicted: int = 0  # candidate poses left out on evidence from outside the maps
 
     def summary(self) -> str:
         x, y, th = self.pose
+        n = self.contradicted
+        seen = f", {n} pose(s) contradicted by sightings" if n else ""
         return (
             f"pose ({x:.2f} m, {y:.2f} m, {math.degrees(th):.1f} deg), overlap "
             f"{self.overlap_m2:.1f} m2, agreeing wall {self.agreeing_wall_m:.1f} m "
             f"({self.agreeing_share:.0%}), conflicts {self.conflict_share:.1%}, rival "
             f"{self.rival_ratio:.2f}, margin {self.margin_wall_m:.1f} m"
+            + seen
             + ("" if self.accepted else f": {self.reason}")
         )
 
@@ -346,18 +353,53 @@ def _verdict(ev: dict, rival: float, margin_m: float, others_fit: int) -> str:
     return ""
 
 
-def match_maps(a: GridPolyMap, b: GridPolyMap) -> MapMatch:
-    """The pose of map B's frame in map A's frame, with its evidence (see the module)."""
+def match_maps(
+    a: GridPolyMap, b: GridPolyMap, contradicts: Callable[[np.ndarray], bool] | None = None
+) -> MapMatch:
+    """The pose of map B's frame in map A's frame, with its evidence (see the module).
+
+    ``contradicts``: evidence from outside the maps (``polyswarm.sighting``: the pose
+    puts one robot where the other's lidar saw nothing). Candidate poses it contradicts,
+    before or after refinement, are left out: in a symmetric building the maps fit the
+    truth and its rotated images alike, and the truth stands alone only once the images
+    are ruled out. A pose no evidence speaks against stays a rival: nothing is accepted
+    on silence."""
     va, vb = _view(a), _view(b)
     cands = _search(va, vb)
     if not cands:
         return MapMatch(np.zeros(3), False, "no candidate pose", 0, 0, 0, 1, 0, 0)
     tree = _wall_tree(va)
-    refined = []
-    for _, pose in cands[:PEAKS]:
+    refined, contradicted = [], 0
+    for _, pose in cands[:PEAKS]:  # not further: a weak peak is no candidate for its rivals
+        if contradicts is not None and contradicts(pose):
+            contradicted += 1
+            continue
         p = _icp(va, tree, vb, pose)
+        if contradicts is not None and contradicts(p):
+            contradicted += 1
+            continue
         refined.append((p, _evidence(va, vb, p)))
+    if not refined:
+        return MapMatch(
+            cands[0][1],
+            False,
+            "every candidate pose is contradicted by sightings",
+            0,
+            0,
+            0,
+            1,
+            0,
+            0,
+            len(cands),
+            contradicted=contradicted,
+        )
     refined.sort(key=lambda r: -r[1]["score"])
+    return _decide(refined, len(cands), contradicted)
+
+
+def _decide(refined: list, candidates: int, contradicted: int = 0) -> MapMatch:
+    """The verdict on the best of the ``refined`` poses (best first), the others its
+    rivals."""
     best, ev = refined[0]
     others = [r for r in refined[1:] if not _close(r[0], best, RIVAL_APART_M, RIVAL_APART_RAD)]
     rival_score = max((r[1]["score"] for r in others), default=0.0)
@@ -370,8 +412,10 @@ def match_maps(a: GridPolyMap, b: GridPolyMap) -> MapMatch:
         reason == "",
         reason,
         rival_ratio=rival,
-        candidates=len(cands),
+        candidates=candidates,
         margin_wall_m=margin_m,
+        refined=tuple(refined),
+        contradicted=contradicted,
         **ev,
     )
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from polyswarm.errors import DecodeError
 from polyswarm.scan import LaserScan
+from polyswarm.sighting import SECTORS
 from protocols.keys import NAME_RE
 
 PROTOCOL_VERSION = 1
@@ -108,6 +109,13 @@ def _str(v: Any, name: str, choices: type[StrEnum] | None = None) -> str:
 def _bytes(v: Any, name: str, max_len: int) -> bytes:
     if not isinstance(v, bytes) or len(v) > max_len:
         raise ProtocolError(f"field {name!r}: expected at most {max_len} bytes")
+    return v
+
+
+def _clear(v: Any) -> bytes:
+    v = _bytes(v, "clr", SECTORS)
+    if v and len(v) != SECTORS:
+        raise ProtocolError(f"field 'clr': expected {SECTORS} bytes, got {len(v)}")
     return v
 
 
@@ -278,6 +286,9 @@ class Pose(Message):
     map_version: int = 0
     blocked_by: str = ""  # a robot standing in this one's way (it should give way)
     frame: int = 0  # the last anchor applied (0: none)
+    # the latest scan's clear profile (``polyswarm.sighting``), sent while a robot of
+    # the swarm is in a frame of its own; b"": not sent
+    clear: bytes = b""
 
     def body(self) -> dict:
         out = {"x": self.x, "y": self.y, "th": self.theta, "ver": self.map_version}
@@ -285,6 +296,8 @@ class Pose(Message):
             out["wait"] = self.blocked_by
         if self.frame:  # absent when 0 (and in older senders' messages)
             out["frame"] = self.frame
+        if self.clear:
+            out["clr"] = self.clear
         return out
 
     @classmethod
@@ -299,6 +312,7 @@ class Pose(Message):
             _int(b.get("ver", 0), "ver", 0),
             wait,
             _int(b.get("frame", 0), "frame", 0),
+            _clear(b.get("clr", b"")),
         )
 
 

@@ -73,3 +73,29 @@ def test_close_returns_off_the_map_are_remembered_for_planning_but_not_a_peers()
     seen = agent.seen.points(0.1)
     assert len(agent.seen) - before == len(box)
     assert np.hypot(*(seen[:, None, :] - peer[None]).transpose(2, 0, 1)).min() > 0.5
+
+
+def test_poses_carry_the_scans_clear_profile_while_a_robot_is_in_a_frame_of_its_own():
+    from polyswarm.config import RobotEntry
+    from polyswarm.sighting import SECTORS
+
+    cfg = replace(Config(), robots=(RobotEntry("r1", (0.0, 0.0, 0.0)), RobotEntry("r2")))
+    agent = RobotAgent("r1", cfg, (0.0, 0.0, 0.0))
+    sent = []
+    for k in range(30):  # 3 s of scans at 10 Hz
+        t = 0.1 * k
+        if k == 15:  # r2's frame is found: its poses name the anchor
+            agent.on_peer_pose("r2", t, Pose(3.0, 0.0, 0.0, frame=1))
+        agent.on_odom(t, Odometry(0.0, 0.0, 0.0))
+        out = agent.on_scan(t, room_scan(t))
+        if out.pose is not None:
+            sent.append((k, out.pose.clear))
+    before = [c for k, c in sent if k < 15 and c]
+    after = [c for k, c in sent if k >= 15]
+    assert len(before) == 2 and all(len(c) == SECTORS for c in before)  # at 1 Hz
+    # the room's walls are 5-7.1 m away; behind, the 270-degree lidar sees nothing
+    prof = np.frombuffer(before[0], np.uint8) * 0.2
+    known = prof > 0
+    assert known.sum() >= 0.7 * SECTORS
+    assert np.all((prof[known] >= 4.8) & (prof[known] <= 7.1)), prof
+    assert after and all(c == b"" for c in after)  # no robot left to find

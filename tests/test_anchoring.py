@@ -84,8 +84,8 @@ def test_a_robot_is_merged_only_after_agreeing_matches_and_its_own_move():
     assert solo is not main
     solo.on_robot_map("r2", b)
     sent = []
-    now = 0.0
-    for _ in range(400):  # matches every MATCH_PERIOD_S of mission time, in a worker
+    now, give_up = 0.0, time.monotonic() + 120.0
+    while time.monotonic() < give_up:  # matches every MATCH_PERIOD_S, in a worker
         sent += frames.tick(main, now)
         if sent:
             break
@@ -109,4 +109,42 @@ def test_a_robot_is_merged_only_after_agreeing_matches_and_its_own_move():
     main.flush()
     both = shapely.union(a.explored_region(), moved.explored_region()).area
     assert abs(main.merged.explored_area() - both) < 0.01 * both
+    frames.close()
+
+
+def test_a_frame_that_puts_the_robot_where_another_saw_nothing_is_never_committed(caplog):
+    """The same maps as above, but r1's lidar saw 10 m clear all around while r2 stood
+    at its start, which the maps' frame puts 5 m from r1: r1 would have seen r2 there.
+    The coordinator commits no frame; the match says why."""
+    import time
+
+    from shapely.geometry import box
+
+    from agents.anchoring import Anchoring
+    from agents.coordinator import Coordinator
+    from polyswarm.sighting import CLEAR_UNIT_M, SECTORS
+    from protocols.messages import Pose
+    from tests.test_mapmatch import _seen
+
+    truth = np.array([4.0, -3.0, 2.1])
+    cfg = Config()
+    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
+    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    main.flush()
+    frames = Anchoring(cfg, ["r2"])
+    frames.owner("r2", main).on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
+    clear_10m = bytes([int(10 / CLEAR_UNIT_M)] * SECTORS)
+    for k in range(20):
+        frames.sighted("r1", 0.5 * k, Pose(0.0, 0.0, 0.0, clear=clear_10m))
+        frames.sighted("r2", 0.5 * k, Pose(0.0, 0.0, 0.0))
+    caplog.set_level("INFO", logger="agents.anchoring")
+    now, sent, give_up = 0.0, [], time.monotonic() + 120.0
+    while frames.waiting["r2"].matches < 3 and time.monotonic() < give_up:
+        sent += frames.tick(main, now)
+        now += 1.0
+        time.sleep(0.05)
+    w = frames.waiting["r2"]
+    assert not sent and w.frames.pose is None
+    assert w.matches >= 3, "the matches ran"
+    assert "contradicted by sightings" in caplog.text
     frames.close()

@@ -249,3 +249,17 @@ def test_a_pose_names_its_frame_only_once_anchored():
         decode(encode(Anchor(0, 3.0, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)
     with pytest.raises(ProtocolError):  # not in the same building
         decode(encode(Anchor(1, 3.0e6, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)
+
+
+def test_a_poses_clear_profile_travels_whole_or_is_refused():
+    from polyswarm.sighting import SECTORS
+    from protocols.messages import Pose
+
+    prof = bytes(range(SECTORS))
+    _, back = decode(encode(Pose(1.0, 2.0, 0.5, 3, clear=prof), "r1", 0, 0.0), Pose)
+    assert back.clear == prof
+    assert "clr" not in Pose(1.0, 2.0, 0.5, 3).body()  # not sent: absent
+    for bad in (prof[:-1], prof + b"\0", "text"):
+        body = {**Pose(1.0, 2.0, 0.5, 3).body(), "clr": bad}
+        with pytest.raises(ProtocolError, match="clr"):
+            Pose.from_body(body)

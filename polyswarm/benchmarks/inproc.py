@@ -44,11 +44,13 @@ def explore_in_process(
     stop_coverage: float = 1.01,
     on_step: Callable[[object, list, object], None] | None = None,
     start_poses: list | None = None,
+    on_pose: Callable[[int, float, object], None] | None = None,
+    sightings: bool | None = None,
 ) -> InProcessRun:
     """``on_step(sim, agents, coordinator)`` is called after every simulation step with
-    scans (for instrumentation). ``start_poses`` (x m, y m, theta rad) per robot: the
-    robots' true starts, also given to the coordinator (default: side by side at the
-    world's start)."""
+    scans (for instrumentation); ``on_pose(robot index, time s, Pose)`` with every pose
+    an agent sends. ``start_poses`` (x m, y m, theta rad) per robot: the robots' true
+    starts, also given to the coordinator (default: side by side at the world's start)."""
     import shapely
 
     from agents.coordinator import Coordinator
@@ -66,6 +68,8 @@ def explore_in_process(
         robots=tuple(RobotEntry(f"r{k + 1}", s) for k, s in enumerate(starts)),
     )
     agents = [RobotAgent(f"r{k + 1}", cfg, starts[k]) for k in range(robots)]
+    for a in agents:
+        a.sightings = sightings
     coord = Coordinator(cfg, {a.id: a.start_pose for a in agents})
     for a in agents:
         coord.on_alive(a.id, True)
@@ -100,6 +104,8 @@ def explore_in_process(
                             out.correction,
                         )
                 if out.pose is not None:
+                    if on_pose is not None:
+                        on_pose(ev.robot, sim.time, out.pose)
                     coord.on_pose(a.id, sim.time, out.pose)
                     for b in agents:
                         b.on_peer_pose(a.id, sim.time, out.pose)

@@ -5,8 +5,10 @@ Each run explores a world with robots at scattered random starts (``sim``'s
 Every ``SNAPSHOT_S`` simulated seconds each robot's map is taken in the robot's own
 frame (its start is its origin), and robot k's map is matched against robot 1's by
 
-* polyswarm's ``match_maps`` (search, ICP, free-space verification; ``mapmatch``), and
-  the ``FrameEstimate`` that commits a frame once successive matches agree;
+* polyswarm's ``match_maps`` (search, ICP, free-space verification; ``mapmatch``), with
+  the robots' sightings up to that moment (``sighting``: each agent sends its scan's clear
+  profile with a pose a second, as robots do while a frame is unknown), and the
+  ``FrameEstimate`` that commits a frame once successive matches agree;
 * the peer method, ``multirobot_map_merge``'s feature-based grid merging
   (``gridmerge``: AKAZE, its hard-coded choice, and ORB) on the same maps rasterised at
   5 cm, at several confidence thresholds (its default is 1.0), so that its best
@@ -35,11 +37,13 @@ WRONG_M, WRONG_RAD = 1.0, math.radians(5.0)  # an accepted frame this far off is
 GRID_THRESHOLDS = (0.3, 0.5, 1.0, 1.5)  # the peer method's estimation_confidence
 
 
-def _snapshots(world: str, seed: int, robots: int, cfg) -> tuple[list, list]:
-    """(moments [(t s, [robot maps in their own frames])], true starts)."""
+def _snapshots(world: str, seed: int, robots: int, cfg) -> tuple[list, list, list]:
+    """(moments [(t s, [robot maps in their own frames])], true starts, each robot's
+    track of poses and clear profiles in its own frame)."""
     from polyswarm.benchmarks.inproc import explore_in_process
     from polyswarm.mapmatch import transform_map
-    from polyswarm.se2 import inverse
+    from polyswarm.se2 import compose, inverse
+    from polyswarm.sighting import Sighting, Track
     from sim import load_world, scattered_start_poses
 
     starts = scattered_start_poses(
@@ -47,6 +51,11 @@ def _snapshots(world: str, seed: int, robots: int, cfg) -> tuple[list, list]:
     )
     moments: list = []
     due = [SNAPSHOT_S]
+    tracks = [Track() for _ in range(robots)]
+
+    def on_pose(k: int, t: float, pose) -> None:
+        own = compose(inverse(np.asarray(starts[k])), (pose.x, pose.y, pose.theta))
+        tracks[k].add(Sighting(t, tuple(float(v) for v in own), pose.clear))
 
     def on_step(sim, agents, _coord) -> None:
         if sim.time >= due[0]:
@@ -63,12 +72,14 @@ def _snapshots(world: str, seed: int, robots: int, cfg) -> tuple[list, list]:
         on_step=on_step,
         stop_coverage=0.99,
         start_poses=starts,
+        on_pose=on_pose,
+        sightings=True,
     )
     own = [
         (t, [transform_map(m, inverse(np.asarray(s))) for m, s in zip(maps, starts, strict=True)])
         for t, maps in moments
     ]
-    return own, starts
+    return own, starts, tracks
 
 
 def _true_overlap(a, b, pose) -> float:
@@ -94,10 +105,11 @@ def _score(est, truth) -> dict:
     }
 
 
-def _pair_moments(moments: list, k: int, truth: np.ndarray) -> list[dict]:
+def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> list[dict]:
     """Both methods on robot 1's and robot k's maps at every moment."""
     from polyswarm.benchmarks.gridmerge import Features, match_grids
     from polyswarm.mapmatch import MIN_OVERLAP_M2, FrameEstimate, MatchError, match_maps
+    from polyswarm.sighting import MIN_CONTRADICTIONS, contradictions
 
     frames = FrameEstimate()
     rows = []
@@ -105,9 +117,14 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray) -> list[dict]:
         a, b = maps[0], maps[k]
         row: dict = {"t_s": t, "overlap_m2": _true_overlap(a, b, truth)}
         row["overlaps"] = row["overlap_m2"] >= MIN_OVERLAP_M2
+        seen_a, seen_b = tracks[0].until(t), tracks[k].until(t)
+
+        def contradicts(frame, seen_a=seen_a, seen_b=seen_b) -> bool:
+            return contradictions(seen_a, seen_b, frame) >= MIN_CONTRADICTIONS
+
         t0 = time.perf_counter()
         try:
-            m = match_maps(a, b)
+            m = match_maps(a, b, contradicts)
         except MatchError:
             m = None
         row["ours_s"] = time.perf_counter() - t0
@@ -121,6 +138,7 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray) -> list[dict]:
                 row["ours"][name] = getattr(m, name)
             row["ours"]["rival_ratio"] = m.rival_ratio
             row["ours"]["margin_wall_m"] = m.margin_wall_m
+            row["ours"]["contradicted"] = m.contradicted
         committed = frames.add(m) if m is not None else frames.pose
         row["committed"] = {"accepted": committed is not None, **_score(committed, truth)}
         for feat in Features:
@@ -177,11 +195,11 @@ def _one_run(profile: str, world: str, seed: int, robots: int) -> list[dict]:
     from polyswarm.se2 import compose, inverse
 
     cfg = with_profile(Config(), profile)
-    moments, starts = _snapshots(world, seed, robots, cfg)
+    moments, starts, tracks = _snapshots(world, seed, robots, cfg)
     pairs = []
     for k in range(1, robots):
         truth = compose(inverse(np.asarray(starts[0])), np.asarray(starts[k]))
-        rows = _pair_moments(moments, k, truth)
+        rows = _pair_moments(moments, k, truth, tracks)
         pairs.append(
             {"profile": profile, "world": world, "seed": seed, "robot": f"r{k + 1}", "rows": rows}
         )

@@ -1,0 +1,179 @@
+"""Would one robot have seen the other there? Evidence for a frame from outside the maps.
+
+Two robots' maps of a building that looks the same after a quarter turn (a ring
+corridor, a cross) fit each other equally well at the true frame and at its rotated
+images: no check on the two maps alone can tell them apart (``polyswarm.mapmatch``).
+What breaks the symmetry is that the robots were *somewhere* at every moment, and lidars
+see robots. A frame predicts where robot B stood, in A's map, at each moment A
+scanned; if the prediction falls well inside what A's scan saw free at that moment, A
+would have seen B there and did not: the frame is contradicted.
+
+Each robot sends, with its poses, a *clear profile* of its latest scan: for each of
+``SECTORS`` equal sectors around it, the distance to the nearest return in that sector
+(``CLEAR_UNIT_M`` steps, rounded down; 0 for a sector without a return). Within that
+distance, the sector held nothing the lidar sees: no robot. ``contradictions`` counts
+the moments where a frame puts the other robot, anywhere within ``NEAR_M`` of where it
+predicts it, inside the viewer's clear sectors.
+
+Assumed: robots are visible to each other's lidars (true of the simulator's robots and
+of TurtleBot-class robots, whose lidar heads sit at the same height), and the robots'
+clocks agree to a fraction of a second (simulated time, or NTP on real robots).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from polyswarm.se2 import inverse, transform_points
+
+SECTORS = 128  # 2.8 degrees each: along a 2 m corridor a sector is clear for 20 m
+CLEAR_UNIT_M = 0.2  # one byte per sector: up to 51 m
+# where a frame puts a robot it may be anywhere this close: the two robots' SLAM poses
+# disagree by up to 0.4 m (seen between two robots mapping alone, loop launch), and
+# their pose stamps by up to half a second of motion
+NEAR_M = 0.5
+PROFILE_PERIOD_S = 1.0  # a robot sends its clear profile with at most one pose a second
+MAX_GAP_S = 1.5  # poses farther apart than this are not interpolated between
+TRACK_LEN = 8000  # poses kept per robot (an hour at 2 Hz)
+# moments that contradict a frame before it is left out: one could be a stale pose or a
+# glitch of timing; three are not (a false one would let a rival image stand alone)
+MIN_CONTRADICTIONS = 3
+
+
+def clear_profile(xy: np.ndarray, blind: np.ndarray = ()) -> bytes:
+    """The clear profile of a scan: ``xy`` (n, 2) its returns, metres in the robot frame;
+    ``blind`` the bearings (radians, robot frame) of beams that might have hit something
+    and not said so (dropouts: a dark robot may be one). Per sector, the distance to its
+    nearest return in ``CLEAR_UNIT_M`` steps, rounded down, capped at 255; 0 where a
+    sector has no return or a blind beam in it or its neighbours (nothing is known)."""
+    out = np.full(SECTORS, 256, dtype=np.int64)
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    if len(xy):
+        d = np.hypot(xy[:, 0], xy[:, 1])
+        units = np.minimum(np.floor(d / CLEAR_UNIT_M), 255).astype(np.int64)
+        np.minimum.at(out, _sector(np.arctan2(xy[:, 1], xy[:, 0])), units)
+    out[out == 256] = 0
+    blind_s = np.unique(_sector(np.asarray(blind, dtype=float)))
+    for k in (-1, 0, 1):  # a beam's bearing is not de-skewed: a sector to either side
+        out[(blind_s + k) % SECTORS] = 0
+    return bytes(out.astype(np.uint8))
+
+
+def _sector(bearing: np.ndarray) -> np.ndarray:
+    u = (np.asarray(bearing) + math.pi) / (2 * math.pi)
+    return (np.floor(u * SECTORS).astype(np.int64)) % SECTORS
+
+
+@dataclass(frozen=True)
+class Sighting:
+    """A robot's pose at a moment, with its scan's clear profile (b"" if not sent)."""
+
+    t_s: float
+    pose: tuple[float, float, float]
+    clear: bytes = b""
+
+
+class Track:
+    """A robot's poses over time in one frame, with the clear profiles sent with them."""
+
+    def __init__(self) -> None:
+        self._items: deque[Sighting] = deque(maxlen=TRACK_LEN)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def add(self, s: Sighting) -> None:
+        if self._items and s.t_s < self._items[-1].t_s:
+            return  # late: the track stays in time order
+        if s.clear and len(s.clear) != SECTORS:
+            s = Sighting(s.t_s, s.pose, b"")
+        self._items.append(s)
+
+    def copy(self) -> Track:
+        out = Track()
+        out._items = self._items.copy()
+        return out
+
+    def until(self, t_s: float) -> Track:
+        """A copy of the poses up to ``t_s``."""
+        out = Track()
+        out._items.extend(s for s in self._items if s.t_s <= t_s)
+        return out
+
+    def moved(self, frame) -> Track:
+        """The track in another frame: each pose composed with ``frame`` (x m, y m, rad)."""
+        out = Track()
+        for s in self._items:
+            x, y = transform_points(frame, np.array([s.pose[:2]]))[0]
+            out._items.append(Sighting(s.t_s, (x, y, s.pose[2] + frame[2]), s.clear))
+        return out
+
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        t = np.fromiter((s.t_s for s in self._items), float, len(self._items))
+        xy = np.array([s.pose[:2] for s in self._items], dtype=float).reshape(-1, 2)
+        return t, xy
+
+    def positions_at(self, times: np.ndarray) -> np.ndarray:
+        """(n, 2) positions at ``times``, interpolated; NaN where no two poses within
+        ``MAX_GAP_S`` bracket a time."""
+        out = np.full((len(times), 2), np.nan)
+        if len(self._items) < 2:
+            return out
+        t, xy = self._arrays()
+        k1 = np.clip(np.searchsorted(t, times, side="right"), 1, len(t) - 1)
+        k0 = k1 - 1
+        gap = t[k1] - t[k0]
+        ok = (times >= t[0]) & (times <= t[-1]) & (gap <= MAX_GAP_S)
+        w = np.where(gap > 0, (times - t[k0]) / np.where(gap > 0, gap, 1.0), 0.0)
+        mid = xy[k0] + w[:, None] * (xy[k1] - xy[k0])
+        out[ok] = mid[ok]
+        return out
+
+    def views(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(times (n,), poses (n, 3), clear distances in metres (n, SECTORS)) of the
+        poses sent with a clear profile."""
+        kept = [s for s in self._items if s.clear]
+        t = np.fromiter((s.t_s for s in kept), float, len(kept))
+        poses = np.array([s.pose for s in kept], dtype=float).reshape(-1, 3)
+        clear = np.frombuffer(b"".join(s.clear for s in kept), dtype=np.uint8)
+        return t, poses, clear.reshape(-1, SECTORS).astype(float) * CLEAR_UNIT_M
+
+
+def unseen(viewer: Track, other: Track, frame) -> int:
+    """Moments where ``frame`` (the other robot's frame in the viewer's, x m, y m, rad)
+    puts the other robot where the viewer's scan saw clear: anywhere within ``NEAR_M`` of
+    the predicted position, the robot would have been nearer than the nearest return of
+    its sector (every sector the disc reaches is clear beyond the disc)."""
+    t, poses, clear = viewer.views()
+    if not len(t):
+        return 0
+    p = transform_points(np.asarray(frame, float), other.positions_at(t))
+    rel = p - poses[:, :2]
+    d = np.hypot(rel[:, 0], rel[:, 1])
+    ok = np.isfinite(d) & (d > NEAR_M)
+    if not ok.any():
+        return 0
+    rows, d, rel = np.flatnonzero(ok), d[ok], rel[ok]
+    bearing = np.arctan2(rel[:, 1], rel[:, 0]) - poses[rows, 2]
+    half = np.arcsin(NEAR_M / d)  # the disc's half-angle as the viewer sees it
+    step = 2 * math.pi / SECTORS
+    nearest = np.minimum(  # every sector the disc reaches: its two edges and between
+        clear[rows, _sector(bearing - half)], clear[rows, _sector(bearing + half)]
+    )
+    for k in range(1, int(np.ceil(half.max() / step)) + 1):
+        for a in (bearing - k * step, bearing + k * step):
+            got = clear[rows, _sector(a)]
+            nearest = np.where(k * step < half, np.minimum(nearest, got), nearest)
+    nearest = np.minimum(nearest, clear[rows, _sector(bearing)])
+    return int(np.sum(nearest > d + NEAR_M))
+
+
+def contradictions(a: Track, b: Track, frame) -> int:
+    """Moments where ``frame`` (B's frame in A's) puts either robot in the other's clear
+    view: A's scans looking for B, and B's scans looking for A."""
+    frame = np.asarray(frame, dtype=float)
+    return unseen(a, b, frame) + unseen(b, a, inverse(frame))

@@ -1,0 +1,153 @@
+"""Sightings: a frame that puts one robot where another's lidar saw nothing is refused."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+from shapely.geometry import box
+
+from polyswarm.mapmatch import PEAKS, frame_error, match_maps, transform_map
+from polyswarm.polymap import GridPolyMap
+from polyswarm.se2 import compose, inverse, transform_points
+from polyswarm.sighting import (
+    CLEAR_UNIT_M,
+    MIN_CONTRADICTIONS,
+    SECTORS,
+    Sighting,
+    Track,
+    clear_profile,
+    contradictions,
+    unseen,
+)
+from tests.test_mapmatch import CELL_M, _typed
+
+ROBOT_RADIUS_M = 0.2
+
+
+def test_a_clear_profile_holds_each_sectors_nearest_return():
+    ahead, left = np.array([[5.0, 0.05], [7.0, -0.05]]), np.array([[0.0, 2.3]])
+    prof = np.frombuffer(clear_profile(np.vstack([ahead, left])), np.uint8)
+    k_ahead = SECTORS // 2  # sector k spans bearings from -pi + k * 2pi / SECTORS
+    k_left = int((math.pi / 2 + math.pi) / (2 * math.pi) * SECTORS)
+    assert prof[k_ahead] == math.floor(5.0 / CLEAR_UNIT_M) or prof[k_ahead - 1] == 25
+    assert prof[k_left] == math.floor(2.3 / CLEAR_UNIT_M)
+    assert np.count_nonzero(prof) <= 3  # no return, nothing known
+    # a dropout beam ahead: that sector and its neighbours say nothing
+    blind = np.frombuffer(clear_profile(np.vstack([ahead, left]), np.array([0.0])), np.uint8)
+    assert blind[k_ahead - 1 : k_ahead + 2].sum() == 0 and blind[k_left] == prof[k_left]
+
+
+def test_positions_are_interpolated_only_between_close_poses():
+    t = Track()
+    for s, x in ((0.0, 0.0), (1.0, 1.0), (5.0, 2.0)):
+        t.add(Sighting(s, (x, 0.0, 0.0)))
+    got = t.positions_at(np.array([0.5, 3.0, 6.0]))
+    assert np.allclose(got[0], (0.5, 0.0))
+    assert np.isnan(got[1:]).all()  # 4 s between poses; after the last one
+
+
+def test_a_robot_predicted_inside_what_another_saw_clear_is_a_contradiction():
+    viewer, other = Track(), Track()
+    clear_10m = bytes([int(10 / CLEAR_UNIT_M)] * SECTORS)
+    for s in np.arange(0.0, 3.0, 0.5):
+        viewer.add(Sighting(s, (0.0, 0.0, 0.0), clear_10m))
+        other.add(Sighting(s, (0.0, 0.0, 0.0)))  # at its own frame's origin all along
+    assert unseen(viewer, other, (5.0, 0.0, 0.0)) == 6  # 5 m out where 10 m were clear
+    assert unseen(viewer, other, (9.5, 0.0, 0.0)) == 0  # at the edge: it may be the return
+    assert unseen(viewer, other, (-20.0, 3.0, 1.0)) == 0  # beyond what was seen
+    assert unseen(other, viewer, (5.0, 0.0, 0.0)) == 0  # the other sent no profile
+
+
+# -- a ring corridor: the maps fit four ways; the robots' sightings tell them apart --------
+
+RING = shapely.difference(box(0, 0, 20, 20), box(2, 2, 18, 18))
+
+
+def _scan(pose, others) -> np.ndarray:
+    """Returns of a 2-degree, 30 m lidar at ``pose`` in the ring, other robots as discs,
+    in the robot frame."""
+    walls = shapely.union_all(
+        [RING.boundary, *(shapely.Point(o).buffer(ROBOT_RADIUS_M) for o in others)]
+    )
+    a = np.radians(np.arange(0, 360, 2.0))
+    p = np.asarray(pose[:2])
+    rays = shapely.linestrings(
+        [[p, p + 30 * np.array([math.cos(b), math.sin(b)])] for b in a + pose[2]]
+    )
+    out = []
+    for ray in rays:
+        hit = shapely.intersection(ray, walls)
+        if hit.is_empty:
+            continue
+        pts = shapely.get_coordinates(hit)
+        out.append(pts[np.argmin(np.hypot(*(pts - p).T))])
+    return transform_points(inverse(np.asarray(pose, float)), np.array(out))
+
+
+def _path(points, t) -> np.ndarray:
+    """(x, y, heading) along the polyline ``points`` at fractions ``t`` of its length."""
+    pts = np.asarray(points, float)
+    seg = np.diff(pts, axis=0)
+    cum = np.concatenate([[0], np.cumsum(np.hypot(*seg.T))])
+    d = t * cum[-1]
+    k = np.clip(np.searchsorted(cum, d, side="right") - 1, 0, len(seg) - 1)
+    w = (d - cum[k]) / np.hypot(*seg[k].T)
+    xy = pts[k] + w[:, None] * seg[k]
+    return np.column_stack([xy, np.arctan2(seg[k, 1], seg[k, 0])])
+
+
+def test_a_symmetric_ring_is_merged_at_its_true_frame_once_sightings_rule_out_the_images():
+    """A's stretch (south half) and B's (west half) fit at the truth and at quarter
+    turns of it. A drives the south, east and north corridors while B drives the west one;
+    each sends clear profiles. Every rotated image puts B where A looked (or A where B
+    looked) and saw nothing; the truth does not."""
+    a_map = GridPolyMap.from_polygons(
+        _typed(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
+    )
+    b_world = GridPolyMap.from_polygons(
+        _typed(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
+    )
+    to_b = np.array([3.0, 1.0, 0.7])  # B's frame: the world moved by this
+    truth = inverse(to_b)  # B's frame in A's (the world's)
+    plain = match_maps(a_map, transform_map(b_world, to_b))
+    assert not plain.accepted and "ambiguous" in plain.reason, plain.summary()
+
+    times = np.arange(0.0, 60.0, 1.0)
+    a_pose = _path([(5, 1), (19, 1), (19, 19), (5, 19)], times / 60.0)
+    b_pose = _path([(1, 17), (1, 3)], times / 60.0)
+    a_track, b_track = Track(), Track()
+    for t, pa, pb in zip(times, a_pose, b_pose, strict=True):
+        a_track.add(Sighting(t, tuple(pa), clear_profile(_scan(pa, [pb[:2]]))))
+        own = compose(to_b, pb)  # B speaks in its own frame
+        b_track.add(Sighting(t, tuple(own), clear_profile(_scan(pb, [pa[:2]]))))
+
+    assert contradictions(a_track, b_track, truth) == 0
+    images = [r[0] for r in plain.refined if frame_error(r[0], truth)[1] > 1.5]
+    assert len(images) >= 2, "the ring's quarter and half turns are among the refined poses"
+    assert sum(contradictions(a_track, b_track, p) >= MIN_CONTRADICTIONS for p in images) >= 2
+
+    def contradicts(frame) -> bool:
+        return contradictions(a_track, b_track, frame) >= MIN_CONTRADICTIONS
+
+    m = match_maps(a_map, transform_map(b_world, to_b), contradicts)
+    assert m.accepted, m.summary()
+    err_m, err_rad = frame_error(m.pose, truth)
+    assert err_m < 0.1 and err_rad < math.radians(1.0)
+    assert m.contradicted >= 2
+
+
+def test_a_pose_every_sighting_contradicts_is_never_accepted():
+    a_map = GridPolyMap.from_polygons(
+        _typed(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
+    )
+    b_map = GridPolyMap.from_polygons(
+        _typed(shapely.intersection(RING, box(-1, 5, 11, 21)), RING.boundary), CELL_M
+    )
+    plain = match_maps(a_map, b_map)
+    silent = match_maps(a_map, b_map, lambda f: False)
+    assert (silent.accepted, silent.reason) == (plain.accepted, plain.reason)
+    everything = match_maps(a_map, b_map, lambda f: True)
+    assert not everything.accepted and "contradicted" in everything.reason
+    assert everything.contradicted == min(PEAKS, everything.candidates)
