@@ -16,8 +16,10 @@ the pose of map B's frame in map A's frame, or says why it cannot:
    agree on, and the share of each map's walls standing in the other's clear space.
    A match is accepted only with enough overlap and agreeing wall, few conflicts, no
    other pose where the maps also fit without contradiction (a symmetric building: the
-   wrong image of a ring corridor may overlap more than the truth), and no other peak
-   nearly as good elsewhere (repeated rooms).
+   wrong image of a ring corridor may overlap more than the truth), no other peak
+   nearly as good elsewhere (repeated rooms), and no image of the pose under a symmetry
+   of either map (where a map fits itself) that neither the maps nor the robots'
+   sightings rule out.
 
     m = match_maps(a, b)   # m.accepted, m.pose (B's frame in A's), m.reason, evidence
 
@@ -29,7 +31,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import shapely
@@ -394,7 +396,54 @@ def match_maps(
             contradicted=contradicted,
         )
     refined.sort(key=lambda r: -r[1]["score"])
-    return _decide(refined, len(cands), contradicted)
+    m = _decide(refined, len(cands), contradicted)
+    if m.accepted:
+        why = _symmetric_images(va, vb, m.pose, contradicts)
+        if why:
+            return replace(m, accepted=False, reason=why)
+    return m
+
+
+def _symmetries(v: _MapView) -> list[np.ndarray]:
+    """The poses ``S`` (not the identity) at which a map fits itself: ``S`` moves it onto
+    itself without contradiction (a ring corridor after a quarter turn, a corridor along
+    itself, a row of identical rooms)."""
+    tree = _wall_tree(v)
+    out: list[np.ndarray] = []
+    for _, pose in _search(v, v)[:PEAKS]:
+        if _close(pose, np.zeros(3), RIVAL_APART_M, RIVAL_APART_RAD):
+            continue
+        p = _icp(v, tree, v, pose)
+        moved = not _close(p, np.zeros(3), RIVAL_APART_M, RIVAL_APART_RAD)
+        if moved and not _inconsistency(_evidence(v, v, p)):
+            out.append(p)
+    return out
+
+
+def _symmetric_images(
+    a: _MapView, b: _MapView, pose: np.ndarray, contradicts: Callable[[np.ndarray], bool] | None
+) -> str:
+    """Why ``pose`` cannot be told from an image of it ("" if it can). Where map A fits
+    itself at ``S``, B fits A at ``S pose`` as well as at ``pose``; where B fits itself,
+    at ``pose S^-1``. Such an image may overlap the other map little yet (the robots have
+    seen little of the same place), so no peak of the search shows it; unless the maps
+    contradict it (walls in each other's clear space) or sightings do, it may be the
+    truth."""
+    images = [compose(s, pose) for s in _symmetries(a)]
+    images += [compose(pose, inverse(s)) for s in _symmetries(b)]
+    for img in images:
+        if _close(img, pose, RIVAL_APART_M, RIVAL_APART_RAD):
+            continue
+        if _evidence(a, b, img)["conflict_share"] > MAX_CONFLICT_SHARE:
+            continue  # the maps rule it out
+        if contradicts is not None and contradicts(img):
+            continue  # sightings rule it out
+        x, y, th = img
+        return (
+            "ambiguous: the maps are symmetric and nothing rules out their image at "
+            f"({x:.2f} m, {y:.2f} m, {math.degrees(th):.1f} deg)"
+        )
+    return ""
 
 
 def _decide(refined: list, candidates: int, contradicted: int = 0) -> MapMatch:

@@ -151,3 +151,26 @@ def test_a_pose_every_sighting_contradicts_is_never_accepted():
     everything = match_maps(a_map, b_map, lambda f: True)
     assert not everything.accepted and "contradicted" in everything.reason
     assert everything.contradicted == min(PEAKS, everything.candidates)
+
+
+def test_a_frame_is_refused_while_an_image_of_it_under_a_symmetry_of_a_map_is_possible():
+    """A has mapped the whole ring: it fits itself after every quarter turn, so B fits A
+    at each image of the true frame, however little B has seen. The frame stands only
+    once every image is ruled out (here by sightings)."""
+    from polyswarm.mapmatch import _symmetric_images, _view
+
+    whole = GridPolyMap.from_polygons(_typed(RING, RING.boundary), CELL_M)
+    part = GridPolyMap.from_polygons(
+        _typed(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
+    )
+    to_b = np.array([3.0, 1.0, 0.7])
+    truth = inverse(to_b)
+    a, b = _view(whole), _view(transform_map(part, to_b))
+    why = _symmetric_images(a, b, truth, None)
+    assert why.startswith("ambiguous: the maps are symmetric"), why
+
+    def images_contradicted(frame) -> bool:
+        return frame_error(frame, truth)[0] > 1.0
+
+    assert _symmetric_images(a, b, truth, images_contradicted) == ""
+    assert _symmetric_images(a, b, truth, lambda f: False).startswith("ambiguous")
