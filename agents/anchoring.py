@@ -35,7 +35,7 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
-from polyswarm.mapmatch import FrameEstimate, MatchError, match_maps
+from polyswarm.mapmatch import AGREE_MATCHES, FrameEstimate, MatchError, match_maps
 from polyswarm.sighting import MIN_CONTRADICTIONS, Sighting, Track, contradictions
 from protocols.messages import Anchor, Pose
 
@@ -122,8 +122,11 @@ class Anchoring:
                 and main.merged.explored_area() >= MIN_MAP_M2
             ):
                 w.last_match_s = now_s
+                # the symmetric images are checked (two more searches) only on a match
+                # that could commit the frame
+                decisive = len(w.frames.run) >= AGREE_MATCHES - 1
                 w.matching = self._pool.submit(
-                    match_maps, main.merged, own, self._contradicts(rid, main)
+                    match_maps, main.merged, own, self._contradicts(rid, main), decisive
                 )
         return out
 
@@ -160,12 +163,18 @@ class Anchoring:
 
     def _contradicts(self, rid: str, main):
         """Whether the sightings so far contradict a frame of ``rid`` (its frame in the
-        shared one): a test on copies of the tracks, for the matching thread."""
+        shared one): a test on copies of the tracks, for the matching thread. A robot's
+        poses from before its latest large correction are left out (they were sent from
+        a frame that far off its map now)."""
         mine = self.tracks.get(rid)
-        theirs = [self.tracks[o].copy() for o in main.robots if o in self.tracks]
+        theirs = [
+            self.tracks[o].since(info.corrected_s)
+            for o, info in main.robots.items()
+            if o in self.tracks
+        ]
         if mine is None or not theirs:
             return None
-        mine = mine.copy()
+        mine = mine.since(self.waiting[rid].solo.robots[rid].corrected_s)
 
         def contradicts(frame: np.ndarray) -> bool:
             return sum(contradictions(t, mine, frame) for t in theirs) >= MIN_CONTRADICTIONS

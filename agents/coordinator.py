@@ -41,9 +41,10 @@ from agents import persist
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.explore import GraphIndex, Reach, Strategy, assign, target_groups
-from polyswarm.follow import Atlas, CorrectionOp, replay_correction
+from polyswarm.follow import Atlas, CorrectionOp, largest_move_m, replay_correction
 from polyswarm.navgraph import NavGraph, clear_of
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions, VectorType
+from polyswarm.sighting import SIGHTING_SLACK_M
 from polyswarm.targets import Sensor, Target, TargetCache, frontier_targets
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import (
@@ -125,6 +126,9 @@ class RobotInfo:
     behind_since: float | None = None  # the robot's map version is ahead of ours since
     announced: int = 0  # the robot's map version, as its poses tell
     pose_t: float = -math.inf  # stamp of the robot's latest pose
+    # stamp of its latest correction that moved a keyframe farther than SIGHTING_SLACK_M:
+    # its poses sent before are that far off its map now (sightings forget them)
+    corrected_s: float = -math.inf
     home_failed: bool = False  # could not drive back to its start (the mission still ends)
 
 
@@ -338,6 +342,8 @@ class Coordinator:
         with self.timed("replay"):
             info.map, info.atlas, changed = replay_correction(info.map, info.atlas, op)
         self.corrections += 1
+        if largest_move_m(op) > SIGHTING_SLACK_M:
+            info.corrected_s = stamp_s
         self._check_behind(info)
         idxs = {c.index for c in changed}
         self._pending.setdefault(rid, set()).update(idxs)

@@ -191,6 +191,18 @@ def choose_moves(atlas: Atlas, poses: dict[int, np.ndarray]) -> dict[int, QPose]
     return out
 
 
+def largest_move_m(op: CorrectionOp) -> float:
+    """How far the correction moves its farthest-moved keyframe (metres; a turn counts
+    at ``REACH_M``)."""
+    return max(
+        (
+            math.hypot(dx, dy) / POSE_UNITS_PER_M + REACH_M * abs(dth) / POSE_UNITS_PER_RAD
+            for _, (dx, dy, dth) in op.moves
+        ),
+        default=0.0,
+    )
+
+
 def _minus(a: QPose, b: QPose) -> QPose:
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 

@@ -99,6 +99,7 @@ class MapMatch:
     # the refined poses with their evidence, best first
     refined: tuple = field(default=(), repr=False, compare=False)
     contradicted: int = 0  # candidate poses left out on evidence from outside the maps
+    images_checked: bool = True  # against the pose's images under the maps' symmetries
 
     def summary(self) -> str:
         x, y, th = self.pose
@@ -356,7 +357,10 @@ def _verdict(ev: dict, rival: float, margin_m: float, others_fit: int) -> str:
 
 
 def match_maps(
-    a: GridPolyMap, b: GridPolyMap, contradicts: Callable[[np.ndarray], bool] | None = None
+    a: GridPolyMap,
+    b: GridPolyMap,
+    contradicts: Callable[[np.ndarray], bool] | None = None,
+    images: bool = True,
 ) -> MapMatch:
     """The pose of map B's frame in map A's frame, with its evidence (see the module).
 
@@ -365,7 +369,11 @@ def match_maps(
     before or after refinement, are left out: in a symmetric building the maps fit the
     truth and its rotated images alike, and the truth stands alone only once the images
     are ruled out. A pose no evidence speaks against stays a rival: nothing is accepted
-    on silence."""
+    on silence.
+
+    ``images``: check an accepted pose against its images under the maps' symmetries
+    (two more searches, about twice the match's time); a match made without it can
+    start a ``FrameEstimate`` but never commits one."""
     va, vb = _view(a), _view(b)
     cands = _search(va, vb)
     if not cands:
@@ -397,11 +405,11 @@ def match_maps(
         )
     refined.sort(key=lambda r: -r[1]["score"])
     m = _decide(refined, len(cands), contradicted)
-    if m.accepted:
+    if m.accepted and images:
         why = _symmetric_images(va, vb, m.pose, contradicts)
         if why:
             return replace(m, accepted=False, reason=why)
-    return m
+    return replace(m, images_checked=images)
 
 
 def _symmetries(v: _MapView) -> list[np.ndarray]:
@@ -493,7 +501,8 @@ class FrameEstimate:
     """One robot's frame in the shared one, from successive ``match_maps`` results.
 
     One accepted match is not trusted: the frame is committed when ``AGREE_MATCHES``
-    accepted matches in a row (made as the maps grew) agree. Once committed, accepted
+    accepted matches in a row (made as the maps grew) agree, the last one checked
+    against the pose's symmetric images. Once committed, accepted
     matches that contradict it are counted; ``REVISE_MATCHES`` in a row that agree among
     themselves replace it (a wrong merge undone). Matches that are not accepted change
     nothing."""
@@ -512,7 +521,7 @@ class FrameEstimate:
             self.run = []
         self.run.append(m.pose)
         if self.pose is None:
-            if len(self.run) >= AGREE_MATCHES:
+            if len(self.run) >= AGREE_MATCHES and m.images_checked:
                 self.pose = self.run[-1]
         elif _close(m.pose, self.pose, AGREE_M, AGREE_RAD):
             self.pose = m.pose  # the latest agreeing estimate (the maps grew)

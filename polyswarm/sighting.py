@@ -36,6 +36,9 @@ CLEAR_UNIT_M = 0.2  # one byte per sector: up to 51 m
 # disagree by up to 0.4 m (seen between two robots mapping alone, loop launch), and
 # their pose stamps by up to half a second of motion
 NEAR_M = 0.5
+# a robot whose map a correction moved farther than this sent its earlier poses from a
+# frame that far off: sightings forget them (a stale pose must not contradict the truth)
+SIGHTING_SLACK_M = 0.25
 PROFILE_PERIOD_S = 1.0  # a robot sends its clear profile with at most one pose a second
 MAX_GAP_S = 1.5  # poses farther apart than this are not interpolated between
 TRACK_LEN = 8000  # poses kept per robot (an hour at 2 Hz)
@@ -96,6 +99,12 @@ class Track:
     def copy(self) -> Track:
         out = Track()
         out._items = self._items.copy()
+        return out
+
+    def since(self, t_s: float) -> Track:
+        """A copy of the poses from ``t_s`` on."""
+        out = Track()
+        out._items.extend(s for s in self._items if s.t_s >= t_s)
         return out
 
     def until(self, t_s: float) -> Track:

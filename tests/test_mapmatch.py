@@ -128,6 +128,15 @@ def test_a_frame_is_committed_only_when_successive_matches_agree():
     assert got is not None and np.allclose(got, (5.1, 2.0, 0.11))
 
 
+def test_a_frame_is_committed_only_by_a_match_checked_against_its_symmetric_images():
+    from dataclasses import replace
+
+    f = FrameEstimate()
+    f.add(_m((1.0, 2.0, 0.1)))
+    assert f.add(replace(_m((1.0, 2.0, 0.1)), images_checked=False)) is None
+    assert f.add(_m((1.02, 2.0, 0.1))) is not None  # the run goes on; this one may commit
+
+
 def test_a_committed_frame_is_revised_by_agreeing_contradictions_only():
     f = FrameEstimate()
     f.add(_m((1.0, 0.0, 0.0)))

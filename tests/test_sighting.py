@@ -174,3 +174,17 @@ def test_a_frame_is_refused_while_an_image_of_it_under_a_symmetry_of_a_map_is_po
 
     assert _symmetric_images(a, b, truth, images_contradicted) == ""
     assert _symmetric_images(a, b, truth, lambda f: False).startswith("ambiguous")
+
+
+def test_poses_from_before_a_large_correction_are_forgotten():
+    from polyswarm.follow import CorrectionOp, largest_move_m
+    from polyswarm.sighting import SIGHTING_SLACK_M
+
+    # keyframe 3 moved 30 mm and 4 turned 0.1 rad (counted 0.5 m at 5 m): the largest
+    op = CorrectionOp(2.0, 7, 8, ((3, (30, -40, 0)), (4, (0, 0, 10_000))), 0)
+    assert math.isclose(largest_move_m(op), 0.5)
+    assert largest_move_m(op) > SIGHTING_SLACK_M
+    t = Track()
+    for s in range(5):
+        t.add(Sighting(float(s), (0.0, 0.0, 0.0)))
+    assert len(t.since(2.0)) == 3 and len(t.until(2.0)) == 3
