@@ -7,8 +7,9 @@ Until the coordinator knows where that frame lies in the shared map frame:
   poses and status, and assigns it frontiers of its map, in its frame. Nothing of it
   enters the merged map, and the other robots are not planned around it;
 * every ``MATCH_PERIOD_S`` its map is matched with the merged map
-  (``polyswarm.mapmatch.match_maps``, in a worker thread: a match takes 0.3-2.5 s), and
-  every match, accepted or not, is logged with its evidence;
+  (``polyswarm.mapmatch.match_maps``, in a worker thread: a match takes 0.3-2.5 s,
+  about three times that when it could commit the frame and the pose's symmetric
+  images are checked), and every match, accepted or not, is logged with its evidence;
 * a match's candidate poses that the robots' sightings contradict are left out
   (``polyswarm.sighting``: the frame would put one robot where another's lidar looked
   and saw nothing); in a symmetric building that is what tells the truth from its
