@@ -372,7 +372,7 @@ def match_maps(
     on silence.
 
     ``images``: check an accepted pose against its images under the maps' symmetries
-    (two more searches, about twice the match's time); a match made without it can
+    (two more searches: a match takes about three times as long); one made without it can
     start a ``FrameEstimate`` but never commits one."""
     va, vb = _view(a), _view(b)
     cands = _search(va, vb)
@@ -391,16 +391,16 @@ def match_maps(
         refined.append((p, _evidence(va, vb, p)))
     if not refined:
         return MapMatch(
-            cands[0][1],
-            False,
-            "every candidate pose is contradicted by sightings",
-            0,
-            0,
-            0,
-            1,
-            0,
-            0,
-            len(cands),
+            pose=cands[0][1],
+            accepted=False,
+            reason="every candidate pose is contradicted by sightings",
+            overlap_m2=0.0,
+            agreeing_wall_m=0.0,
+            agreeing_share=0.0,
+            conflict_share=1.0,
+            rival_ratio=0.0,
+            score=0.0,
+            candidates=len(cands),
             contradicted=contradicted,
         )
     refined.sort(key=lambda r: -r[1]["score"])
