@@ -857,8 +857,8 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         msg = item.msg
                         if isinstance(msg, Pose):
                             anchoring.sighted(rid, item.stamp_s, msg)
-                        if isinstance(msg, Pose) and rid in anchoring.waiting:
-                            anchoring.on_pose(rid, msg.frame, msg.map_version, coord)
+                            if rid in anchoring.waiting:
+                                anchoring.on_pose(rid, msg.frame, msg.map_version, coord)
                         owner = anchoring.owner(rid, coord)
                         if owner is not coord:  # exploring alone: its own coordinator
                             _robot_message(owner, rid, item, resync)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from polyswarm.se2 import inverse, transform_points
+from polyswarm.se2 import compose, inverse, transform_points
 
 SECTORS = 128  # 2.8 degrees each: along a 2 m corridor a sector is clear for 20 m
 CLEAR_UNIT_M = 0.2  # one byte per sector: up to 51 m
@@ -98,11 +98,6 @@ class Track:
             s = Sighting(s.t_s, s.pose, b"")
         self._items.append(s)
 
-    def copy(self) -> Track:
-        out = Track()
-        out._items = self._items.copy()
-        return out
-
     def since(self, t_s: float) -> Track:
         """A copy of the poses from ``t_s`` on."""
         out = Track()
@@ -119,8 +114,8 @@ class Track:
         """The track in another frame: each pose composed with ``frame`` (x m, y m, rad)."""
         out = Track()
         for s in self._items:
-            x, y = transform_points(frame, np.array([s.pose[:2]]))[0]
-            out._items.append(Sighting(s.t_s, (x, y, s.pose[2] + frame[2]), s.clear))
+            pose = tuple(float(v) for v in compose(frame, s.pose))
+            out._items.append(Sighting(s.t_s, pose, s.clear))
         return out
 
     def _arrays(self) -> tuple[np.ndarray, np.ndarray]:

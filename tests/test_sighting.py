@@ -31,9 +31,11 @@ def test_a_clear_profile_holds_each_sectors_nearest_return():
     prof = np.frombuffer(clear_profile(np.vstack([ahead, left])), np.uint8)
     k_ahead = SECTORS // 2  # sector k spans bearings from -pi + k * 2pi / SECTORS
     k_left = int((math.pi / 2 + math.pi) / (2 * math.pi) * SECTORS)
-    assert prof[k_ahead] == math.floor(5.0 / CLEAR_UNIT_M) or prof[k_ahead - 1] == 25
+    # 0.6 deg left of ahead, 0.4 deg right of it: two sectors, each its own return
+    assert prof[k_ahead] == math.floor(5.0 / CLEAR_UNIT_M)
+    assert prof[k_ahead - 1] == math.floor(7.0 / CLEAR_UNIT_M)
     assert prof[k_left] == math.floor(2.3 / CLEAR_UNIT_M)
-    assert np.count_nonzero(prof) <= 3  # no return, nothing known
+    assert np.count_nonzero(prof) == 3  # no return, nothing known
     # a dropout beam ahead: that sector and its neighbours say nothing
     blind = np.frombuffer(clear_profile(np.vstack([ahead, left]), np.array([0.0])), np.uint8)
     assert blind[k_ahead - 1 : k_ahead + 2].sum() == 0 and blind[k_left] == prof[k_left]
@@ -188,3 +190,11 @@ def test_poses_from_before_a_large_correction_are_forgotten():
     for s in range(5):
         t.add(Sighting(float(s), (0.0, 0.0, 0.0)))
     assert len(t.since(2.0)) == 3 and len(t.until(2.0)) == 3
+
+
+def test_a_track_moved_into_another_frame_keeps_its_times_and_profiles():
+    t = Track()
+    t.add(Sighting(1.0, (1.0, 0.0, 0.5), bytes(SECTORS)))
+    (s,) = t.moved((2.0, 3.0, math.pi / 2))._items
+    assert s.t_s == 1.0 and s.clear == bytes(SECTORS)
+    assert np.allclose(s.pose, (2.0, 4.0, 0.5 + math.pi / 2))
