@@ -37,7 +37,7 @@ import numpy as np
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
 from polyswarm.mapmatch import AGREE_MATCHES, FrameEstimate, MatchError, match_maps
-from polyswarm.sighting import MIN_CONTRADICTIONS, Sighting, Track, contradictions
+from polyswarm.sighting import MIN_CONTRADICTIONS, Room, Sighting, Track, contradictions
 from protocols.messages import Anchor, Pose
 
 log = logging.getLogger(__name__)
@@ -176,9 +176,14 @@ class Anchoring:
         if mine is None or not theirs:
             return None
         mine = mine.since(self.waiting[rid].solo.robots[rid].corrected_s)
+        maps = (main.merged, self.waiting[rid].solo.robots[rid].map)
+        rooms: list = []  # where the robots can stand in each map: built in the matching thread
 
         def contradicts(frame: np.ndarray) -> bool:
-            return sum(contradictions(t, mine, frame) for t in theirs) >= MIN_CONTRADICTIONS
+            if not rooms:
+                rooms.extend([Room(maps[0]), Room(maps[1])])
+            n = sum(contradictions(t, mine, frame, (rooms[0], rooms[1])) for t in theirs)
+            return n >= MIN_CONTRADICTIONS
 
         return contradicts
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +48,22 @@ TRACK_LEN = 8000  # poses kept per robot (an hour at 2 Hz)
 # moments that contradict a frame before it is left out: one could be a stale pose or a
 # glitch of timing; three are not (a false one would let a rival image stand alone)
 MIN_CONTRADICTIONS = 3
+# a robot's body reaches this far from its pose (the simulator's 0.2 m, a TurtleBot4's
+# 0.17 m): the return it makes is nearer than its pose by up to this
+BODY_M = 0.3
+# a return at least this far from every wall of the viewer's map is not a wall: a sector
+# 2.8 degrees wide places a return up to 0.25 m aside at 10 m, and wrong frames' best
+# predictions along corridors met returns up to 0.55 m (once 0.86 m) from the map's walls
+# (bench merge's loop and cross, seed 0)
+WALL_CLEAR_M = 0.6
+# moments a robot must be seen where a frame puts it before the frame is believed: one
+# could be a third robot or a person passing there; three at once are not
+MIN_SEEN = 3
+# a robot's centre is at least this far from a wall of the map it stands in (TurtleBot3
+# Burger: 0.105 m; map walls are line fits, a few centimetres off)
+ROOM_CLEAR_M = 0.1
+ROOM_RES_M = 0.1  # the raster of where a robot can stand
+DISC_STEP_M = 0.2  # the disc around a prediction is tried at places this far apart
 
 
 def clear_profile(xy: np.ndarray, blind: np.ndarray = ()) -> bytes:
@@ -149,11 +166,55 @@ class Track:
         return t, poses, clear.reshape(-1, SECTORS).astype(float) * CLEAR_UNIT_M
 
 
-def unseen(viewer: Track, other: Track, frame) -> int:
+class Room:
+    """Where a robot's centre can be in a map: its explored free space, at least
+    ``ROOM_CLEAR_M`` from walls, as a raster (``ROOM_RES_M``) built once per test."""
+
+    def __init__(self, pmap) -> None:
+        from scipy.ndimage import binary_erosion
+
+        x0, y0, x1, y1 = pmap.bounds()
+        self.origin = np.array([x0, y0], dtype=float)
+        nx = max(1, math.ceil((x1 - x0) / ROOM_RES_M))
+        ny = max(1, math.ceil((y1 - y0) / ROOM_RES_M))
+        ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+        centres = self.origin + (np.column_stack([ix.ravel(), iy.ravel()]) + 0.5) * ROOM_RES_M
+        free = pmap.is_free_many(centres).reshape(nx, ny)
+        r = math.ceil(ROOM_CLEAR_M / ROOM_RES_M)
+        disk = np.hypot(*np.mgrid[-r : r + 1, -r : r + 1]) <= r
+        self.grid = binary_erosion(free, disk, border_value=0)
+
+    def allows(self, xy: np.ndarray) -> np.ndarray:
+        """(n, 2) points (metres) -> True where a robot's centre could be."""
+        ij = np.floor((np.asarray(xy, float).reshape(-1, 2) - self.origin) / ROOM_RES_M)
+        ij = ij.astype(np.int64)
+        inside = (ij >= 0).all(axis=1) & (ij < self.grid.shape).all(axis=1)
+        out = np.zeros(len(ij), dtype=bool)
+        out[inside] = self.grid[ij[inside, 0], ij[inside, 1]]
+        return out
+
+
+# offsets (metres) a disc of radius NEAR_M is sampled at
+_DISC = np.array(
+    [
+        (x, y)
+        for x in np.arange(-NEAR_M, NEAR_M + 1e-9, DISC_STEP_M)
+        for y in np.arange(-NEAR_M, NEAR_M + 1e-9, DISC_STEP_M)
+        if math.hypot(x, y) <= NEAR_M
+    ]
+)
+
+
+def unseen(viewer: Track, other: Track, frame, room: Room | None = None) -> int:
     """Moments where ``frame`` (the other robot's frame in the viewer's, x m, y m, rad)
     puts the other robot where the viewer's scan saw clear: anywhere within ``NEAR_M`` of
     the predicted position, the robot would have been nearer than the nearest return of
-    its sector (every sector the disc reaches is clear beyond the disc)."""
+    its sector.
+
+    Without ``room`` every sector the disc reaches must be clear beyond the disc: a wall
+    within ``NEAR_M`` of the prediction hides it, and along a corridor that is every
+    prediction. With ``room`` (the viewer's map, ``Room``) only the disc's places where a
+    robot can stand count: each must lie within its sector's clear distance."""
     t, poses, clear = viewer.views()
     if not len(t):
         return 0
@@ -163,6 +224,8 @@ def unseen(viewer: Track, other: Track, frame) -> int:
     ok = np.isfinite(d) & (d > MIN_SIGHT_M)
     if not ok.any():
         return 0
+    if room is not None:
+        return _unseen_in_room(poses[ok], clear[ok], p[ok], room)
     rows, d, rel = np.flatnonzero(ok), d[ok], rel[ok]
     bearing = np.arctan2(rel[:, 1], rel[:, 0]) - poses[rows, 2]
     half = np.arcsin(NEAR_M / d)  # the disc's half-angle as the viewer sees it
@@ -178,8 +241,81 @@ def unseen(viewer: Track, other: Track, frame) -> int:
     return int(np.sum(nearest > d + NEAR_M))
 
 
-def contradictions(a: Track, b: Track, frame) -> int:
+def _unseen_in_room(poses: np.ndarray, clear: np.ndarray, p: np.ndarray, room: Room) -> int:
+    """``unseen`` with the disc cut to where a robot can stand (see there)."""
+    n, m = len(p), len(_DISC)
+    pts = (p[:, None, :] + _DISC[None, :, :]).reshape(-1, 2)
+    can = room.allows(pts).reshape(n, m)
+    rel = pts.reshape(n, m, 2) - poses[:, None, :2]
+    dist = np.hypot(rel[..., 0], rel[..., 1])
+    bearing = np.arctan2(rel[..., 1], rel[..., 0]) - poses[:, 2:3]
+    got = np.take_along_axis(clear, _sector(bearing), axis=1)
+    would_see = (got > dist) & (dist > MIN_SIGHT_M / 2)
+    # contradicted: somewhere to stand, and the scan would have seen the robot at each
+    return int(np.sum(can.any(axis=1) & (would_see | ~can).all(axis=1)))
+
+
+def seen(viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.ndarray]) -> int:
+    """Moments where the viewer's scan had a return where ``frame`` (the other robot's
+    frame in the viewer's, x m, y m, rad) puts the other robot (within ``NEAR_M``, its
+    body ``BODY_M``) and its map has no wall there: the other robot, seen.
+
+    ``no_wall``: (n, 2) points in the viewer's frame -> True where a point lies in the
+    viewer's explored space farther than ``WALL_CLEAR_M`` from its walls
+    (``no_wall_test``). A frame's prediction that meets an unexplained return again and
+    again is positive evidence; silence (no return, or a wall) is none."""
+    t, poses, clear = viewer.views()
+    if not len(t):
+        return 0
+    p = transform_points(np.asarray(frame, float), other.positions_at(t))
+    rel = p - poses[:, :2]
+    d = np.hypot(rel[:, 0], rel[:, 1])
+    ok = np.isfinite(d) & (d > MIN_SIGHT_M)
+    if not ok.any():
+        return 0
+    rows, d, rel = np.flatnonzero(ok), d[ok], rel[ok]
+    bearing = np.arctan2(rel[:, 1], rel[:, 0]) - poses[rows, 2]
+    half = np.arcsin(NEAR_M / d)
+    step = 2 * math.pi / SECTORS
+    miss = np.full(len(rows), np.inf)  # per moment: how far the nearest return of the
+    got = np.zeros((len(rows), 2))  # disc's sectors is from the prediction; its range, bearing
+    reach = int(np.ceil(half.max() / step))
+    for k in range(-reach, reach + 1):
+        s = _sector(bearing + k * step)
+        r = clear[rows, s] + CLEAR_UNIT_M / 2  # the return's range, to half a step
+        m = np.where(clear[rows, s] > 0, np.abs(r - d), np.inf)
+        better = (abs(k) * step <= half) & (m < miss)
+        miss = np.where(better, m, miss)
+        got[better] = np.column_stack([r, (s + 0.5) * step - math.pi])[better]
+    hit = miss <= NEAR_M + BODY_M
+    if not hit.any():
+        return 0
+    rng, heading = got[hit, 0], poses[rows[hit], 2] + got[hit, 1]
+    ray = np.column_stack([np.cos(heading), np.sin(heading)])
+    q = poses[rows[hit], :2] + rng[:, None] * ray
+    # the return and the space just behind it (a robot's width on) are both clear of the
+    # viewer's walls: a wall's return has its wall, and what lies behind it unexplored
+    clear_of_walls = no_wall(np.vstack([q, q + 2 * BODY_M * ray]))
+    return int(np.sum(clear_of_walls[: len(q)] & clear_of_walls[len(q) :]))
+
+
+def no_wall_test(pmap, clear_m: float = WALL_CLEAR_M) -> Callable[[np.ndarray], np.ndarray]:
+    """``seen``'s map test on ``pmap`` (a GridPolyMap): explored and clear of walls."""
+
+    def no_wall(xy: np.ndarray) -> np.ndarray:
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        out = pmap.is_free_many(xy)
+        for i in np.flatnonzero(out):
+            out[i] = pmap.nearest_obstacle_distance(xy[i, 0], xy[i, 1], clear_m) > clear_m
+        return out
+
+    return no_wall
+
+
+def contradictions(a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = None) -> int:
     """Moments where ``frame`` (B's frame in A's) puts either robot in the other's clear
-    view: A's scans looking for B, and B's scans looking for A."""
+    view: A's scans looking for B, and B's scans looking for A. ``rooms``: A's and B's
+    maps as ``Room`` (see ``unseen``)."""
     frame = np.asarray(frame, dtype=float)
-    return unseen(a, b, frame) + unseen(b, a, inverse(frame))
+    ra, rb = rooms if rooms is not None else (None, None)
+    return unseen(a, b, frame, ra) + unseen(b, a, inverse(frame), rb)

@@ -15,10 +15,14 @@ from polyswarm.sighting import (
     CLEAR_UNIT_M,
     MIN_CONTRADICTIONS,
     SECTORS,
+    WALL_CLEAR_M,
+    Room,
     Sighting,
     Track,
     clear_profile,
     contradictions,
+    no_wall_test,
+    seen,
     unseen,
 )
 from tests.test_mapmatch import CELL_M, _typed
@@ -65,6 +69,50 @@ def test_a_robot_predicted_inside_what_another_saw_clear_is_a_contradiction():
 # -- a ring corridor: the maps fit four ways; the robots' sightings tell them apart --------
 
 RING = shapely.difference(box(0, 0, 20, 20), box(2, 2, 18, 18))
+
+
+def _corridor_map() -> GridPolyMap:
+    """A 2 m wide corridor, 30 m long, along x from (0, 0); its walls at y = +-1 m."""
+    hall = box(-0.5, -1.0, 30.0, 1.0)
+    return GridPolyMap.from_polygons(_typed(hall, hall.boundary), CELL_M)
+
+
+def test_a_room_is_the_explored_space_a_robots_centre_fits_in():
+    room = Room(_corridor_map())
+    got = room.allows(np.array([[10.0, 0.0], [10.0, 0.75], [10.0, 0.97], [10.0, 1.5], [40, 0]]))
+    assert got.tolist() == [True, True, False, False, False]  # 3 cm from the wall: no
+
+
+def test_along_a_corridor_only_where_a_robot_can_stand_is_looked_at():
+    """Looking down a corridor clear for 25 m, a robot predicted 0.6 m from its wall 10 m
+    out: the disc around the prediction reaches the wall (its sectors' returns are the
+    wall's), so without the map nothing is concluded; within the corridor every place
+    the robot could stand was in clear view: contradicted."""
+    viewer, other = Track(), Track()
+    profile = np.zeros(SECTORS, dtype=np.uint8)
+    for k in range(SECTORS):  # the corridor's walls as the viewer at (0, 0, 0) sees them
+        b = (k + 0.5) * 2 * math.pi / SECTORS - math.pi
+        r = 25.0 if abs(math.sin(b)) < 1e-9 else min(25.0, 1.0 / abs(math.sin(b)))
+        profile[k] = min(255, int(r / CLEAR_UNIT_M)) if math.cos(b) > 0 else 2
+    for s in np.arange(0.0, 3.0, 0.5):
+        viewer.add(Sighting(s, (0.0, 0.0, 0.0), bytes(profile)))
+        other.add(Sighting(s, (0.0, 0.0, 0.0)))
+    near_wall = (10.0, 0.4, 0.0)
+    assert unseen(viewer, other, near_wall) == 0
+    assert unseen(viewer, other, near_wall, Room(_corridor_map())) == 6
+    # a return where the robot is predicted (it was seen): not contradicted
+    profile[SECTORS // 2] = int(9.8 / CLEAR_UNIT_M)
+    profile[SECTORS // 2 + 1] = int(9.8 / CLEAR_UNIT_M)
+    seen_track = Track()
+    for s in np.arange(0.0, 3.0, 0.5):
+        seen_track.add(Sighting(s, (0.0, 0.0, 0.0), bytes(profile)))
+    centre = (10.0, 0.1, 0.0)
+    assert unseen(seen_track, other, centre, Room(_corridor_map())) == 0
+    # and that return, clear of the walls with the corridor free behind it, is a sighting
+    no_wall = no_wall_test(_corridor_map())
+    assert seen(seen_track, other, centre, no_wall) == 6
+    assert seen(viewer, other, centre, no_wall) == 0  # the returns there are the walls'
+    assert WALL_CLEAR_M < 1.0  # the corridor's middle is farther than that from its walls
 
 
 def _scan(pose, others) -> np.ndarray:

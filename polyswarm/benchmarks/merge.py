@@ -109,7 +109,8 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
     """Both methods on robot 1's and robot k's maps at every moment."""
     from polyswarm.benchmarks.gridmerge import Features, match_grids
     from polyswarm.mapmatch import MIN_OVERLAP_M2, FrameEstimate, MatchError, match_maps
-    from polyswarm.sighting import MIN_CONTRADICTIONS, contradictions
+    from polyswarm.se2 import inverse
+    from polyswarm.sighting import MIN_CONTRADICTIONS, Room, contradictions, no_wall_test, seen
 
     frames = FrameEstimate()
     rows = []
@@ -118,9 +119,10 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
         row: dict = {"t_s": t, "overlap_m2": _true_overlap(a, b, truth)}
         row["overlaps"] = row["overlap_m2"] >= MIN_OVERLAP_M2
         seen_a, seen_b = tracks[0].until(t), tracks[k].until(t)
+        rooms = (Room(a), Room(b))  # where each map lets a robot stand
 
-        def contradicts(frame, seen_a=seen_a, seen_b=seen_b) -> bool:
-            return contradictions(seen_a, seen_b, frame) >= MIN_CONTRADICTIONS
+        def contradicts(frame, seen_a=seen_a, seen_b=seen_b, rooms=rooms) -> bool:
+            return contradictions(seen_a, seen_b, frame, rooms) >= MIN_CONTRADICTIONS
 
         t0 = time.perf_counter()
         try:
@@ -139,6 +141,11 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
             row["ours"]["rival_ratio"] = m.rival_ratio
             row["ours"]["margin_wall_m"] = m.margin_wall_m
             row["ours"]["contradicted"] = m.contradicted
+            # the robots seen where the pose puts them (positive evidence; rare: robots
+            # that explore apart seldom see each other)
+            row["ours"]["seen"] = seen(seen_a, seen_b, m.pose, no_wall_test(a)) + seen(
+                seen_b, seen_a, inverse(np.asarray(m.pose)), no_wall_test(b)
+            )
         committed = frames.add(m) if m is not None else frames.pose
         row["committed"] = {"accepted": committed is not None, **_score(committed, truth)}
         for feat in Features:
