@@ -81,6 +81,7 @@ def test_a_room_is_the_explored_space_a_robots_centre_fits_in():
     room = Room(_corridor_map())
     got = room.allows(np.array([[10.0, 0.0], [10.0, 0.75], [10.0, 0.97], [10.0, 1.5], [40, 0]]))
     assert got.tolist() == [True, True, False, False, False]  # 3 cm from the wall: no
+    assert not Room(GridPolyMap(CELL_M)).allows(np.zeros((1, 2))).any()  # an empty map
 
 
 def test_along_a_corridor_only_where_a_robot_can_stand_is_looked_at():
