@@ -222,19 +222,13 @@ def unseen(viewer: Track, other: Track, frame, room: Room | None = None) -> int:
     within ``NEAR_M`` of the prediction hides it, and along a corridor that is every
     prediction. With ``room`` (the viewer's map, ``Room``) only the disc's places where a
     robot can stand count: each must lie within its sector's clear distance."""
-    t, poses, clear = viewer.views()
-    if not len(t):
+    pred = _predictions(viewer, other, frame)
+    if pred is None:
         return 0
-    p = transform_points(np.asarray(frame, float), other.positions_at(t))
-    rel = p - poses[:, :2]
-    d = np.hypot(rel[:, 0], rel[:, 1])
-    ok = np.isfinite(d) & (d > MIN_SIGHT_M)
-    if not ok.any():
-        return 0
+    poses, clear, p, d, bearing = pred
     if room is not None:
-        return _unseen_in_room(poses[ok], clear[ok], p[ok], room)
-    rows, d, rel = np.flatnonzero(ok), d[ok], rel[ok]
-    bearing = np.arctan2(rel[:, 1], rel[:, 0]) - poses[rows, 2]
+        return _unseen_in_room(poses, clear, p, room)
+    rows = np.arange(len(d))
     half = np.arcsin(NEAR_M / d)  # the disc's half-angle as the viewer sees it
     step = 2 * math.pi / SECTORS
     nearest = np.minimum(  # every sector the disc reaches: its two edges and between
@@ -246,6 +240,24 @@ def unseen(viewer: Track, other: Track, frame, room: Room | None = None) -> int:
             nearest = np.where(k * step < half, np.minimum(nearest, got), nearest)
     nearest = np.minimum(nearest, clear[rows, _sector(bearing)])
     return int(np.sum(nearest > d + NEAR_M))
+
+
+def _predictions(viewer: Track, other: Track, frame):
+    """The viewer's moments where ``frame`` places the other robot far enough away for a
+    bearing to mean something: (viewer poses (n, 3), clear distances (n, SECTORS),
+    predicted positions (n, 2), their distances (n,) and bearings in the viewer's frame
+    (n,)); None if there is none."""
+    t, poses, clear = viewer.views()
+    if not len(t):
+        return None
+    p = transform_points(np.asarray(frame, float), other.positions_at(t))
+    rel = p - poses[:, :2]
+    d = np.hypot(rel[:, 0], rel[:, 1])
+    ok = np.isfinite(d) & (d > MIN_SIGHT_M)
+    if not ok.any():
+        return None
+    bearing = np.arctan2(rel[ok, 1], rel[ok, 0]) - poses[ok, 2]
+    return poses[ok], clear[ok], p[ok], d[ok], bearing
 
 
 def _unseen_in_room(poses: np.ndarray, clear: np.ndarray, p: np.ndarray, room: Room) -> int:
@@ -271,17 +283,11 @@ def seen(viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.
     viewer's explored space farther than ``WALL_CLEAR_M`` from its walls
     (``no_wall_test``). A frame's prediction that meets an unexplained return again and
     again is positive evidence; silence (no return, or a wall) is none."""
-    t, poses, clear = viewer.views()
-    if not len(t):
+    pred = _predictions(viewer, other, frame)
+    if pred is None:
         return 0
-    p = transform_points(np.asarray(frame, float), other.positions_at(t))
-    rel = p - poses[:, :2]
-    d = np.hypot(rel[:, 0], rel[:, 1])
-    ok = np.isfinite(d) & (d > MIN_SIGHT_M)
-    if not ok.any():
-        return 0
-    rows, d, rel = np.flatnonzero(ok), d[ok], rel[ok]
-    bearing = np.arctan2(rel[:, 1], rel[:, 0]) - poses[rows, 2]
+    poses, clear, _, d, bearing = pred
+    rows = np.arange(len(d))
     half = np.arcsin(NEAR_M / d)
     step = 2 * math.pi / SECTORS
     miss = np.full(len(rows), np.inf)  # per moment: how far the nearest return of the
@@ -297,9 +303,9 @@ def seen(viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.
     hit = miss <= NEAR_M + BODY_M
     if not hit.any():
         return 0
-    rng, heading = got[hit, 0], poses[rows[hit], 2] + got[hit, 1]
+    rng, heading = got[hit, 0], poses[hit, 2] + got[hit, 1]
     ray = np.column_stack([np.cos(heading), np.sin(heading)])
-    q = poses[rows[hit], :2] + rng[:, None] * ray
+    q = poses[hit, :2] + rng[:, None] * ray
     # the return and the space just behind it (a robot's width on) are both clear of the
     # viewer's walls: a wall's return has its wall, and what lies behind it unexplored
     clear_of_walls = no_wall(np.vstack([q, q + 2 * BODY_M * ray]))
