@@ -36,8 +36,16 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
-from polyswarm.mapmatch import AGREE_MATCHES, FrameEstimate, MatchError, match_maps
-from polyswarm.sighting import MIN_CONTRADICTIONS, Room, Sighting, Track, contradictions
+from polyswarm.mapmatch import AGREE_MATCHES, FrameEstimate, MapMatch, MatchError, match_maps
+from polyswarm.se2 import inverse, transform_points
+from polyswarm.sighting import (
+    MIN_CONTRADICTIONS,
+    Room,
+    Sighting,
+    Track,
+    contradictions,
+    mutual_seen,
+)
 from protocols.messages import Anchor, Pose
 
 log = logging.getLogger(__name__)
@@ -126,14 +134,32 @@ class Anchoring:
                 # the symmetric images are checked (two more searches) only on a match
                 # that could commit the frame
                 decisive = len(w.frames.run) >= AGREE_MATCHES - 1
+                contradicts, seen_at = self._evidence(rid, main)
                 w.matching = self._pool.submit(
-                    match_maps, main.merged, own, self._contradicts(rid, main), decisive
+                    _match, main.merged, own, contradicts, seen_at, decisive
                 )
+            self._rendezvous(rid, w, main)
         return out
+
+    def _rendezvous(self, rid: str, w: _Waiting, main) -> None:
+        """Send a waiting robot towards where its candidate frame puts the nearest
+        robot of the swarm (in its own frame): if the frame is right they see each other
+        there and the frame is committed; if not, the robot finds the place empty (or a
+        wall), the sightings contradict the frame and the next match leaves it out."""
+        solo = w.solo
+        me = solo.robots[rid].pose
+        frame = w.frames.candidate
+        others = [r.pose for r in main.robots.values() if r.alive and r.pose is not None]
+        if frame is None or me is None or not others:
+            solo.rendezvous_xy = None
+            return
+        there = transform_points(inverse(frame), np.array([p[:2] for p in others]))
+        near = there[np.argmin(np.hypot(*(there - me[:2]).T))]
+        solo.rendezvous_xy = (float(near[0]), float(near[1]))
 
     def _took(self, rid: str, w: _Waiting, done: Future) -> None:
         try:
-            m = done.result()
+            m, seen = done.result()
         except (MatchError, PolyswarmError) as e:
             log.info("map of %s not matched: %s", rid, e)
             return
@@ -142,12 +168,13 @@ class Anchoring:
             return
         w.matches += 1
         before = w.frames.pose
-        w.frames.add(m)
+        w.frames.add(m, seen)
         log.info(
-            "map of %s against the merged map (match %d): %s%s",
+            "map of %s against the merged map (match %d): %s, seen %d time(s)%s",
             rid,
             w.matches,
             m.summary(),
+            seen,
             "" if m.accepted else " (refused)",
         )
         if before is None and w.frames.pose is not None:
@@ -162,11 +189,12 @@ class Anchoring:
         track = self.tracks.setdefault(rid, Track())
         track.add(Sighting(stamp_s, (pose.x, pose.y, pose.theta), pose.clear))
 
-    def _contradicts(self, rid: str, main):
-        """Whether the sightings so far contradict a frame of ``rid`` (its frame in the
-        shared one): a test on copies of the tracks, for the matching thread. A robot's
-        poses from before its latest large correction are left out (they were sent from
-        a frame that far off its map now)."""
+    def _evidence(self, rid: str, main):
+        """Two tests of a frame of ``rid`` (its frame in the shared one) on copies of the
+        sightings so far, for the matching thread: whether they contradict it, and how
+        often the robots saw each other where it puts them ((None, None) without
+        sightings). A robot's poses from before its latest large correction are left out
+        (they were sent from a frame that far off its map now)."""
         mine = self.tracks.get(rid)
         theirs = [
             self.tracks[o].since(info.corrected_s)
@@ -174,7 +202,7 @@ class Anchoring:
             if o in self.tracks
         ]
         if mine is None or not theirs:
-            return None
+            return None, None
         mine = mine.since(self.waiting[rid].solo.robots[rid].corrected_s)
         maps = (main.merged, self.waiting[rid].solo.robots[rid].map)
         rooms: list = []  # where the robots can stand in each map: built in the matching thread
@@ -185,7 +213,10 @@ class Anchoring:
             n = sum(contradictions(t, mine, frame, (rooms[0], rooms[1])) for t in theirs)
             return n >= MIN_CONTRADICTIONS
 
-        return contradicts
+        def seen_at(frame: np.ndarray) -> int:
+            return sum(mutual_seen(t, mine, frame, maps) for t in theirs)
+
+        return contradicts, seen_at
 
     def on_pose(self, rid: str, frame: int, map_version: int, main) -> bool:
         """A pose of ``rid`` naming ``frame`` at its map ``map_version``: hands the robot
@@ -218,3 +249,10 @@ class Anchoring:
             info.atlas = solo.atlas
         log.info("robot %s joins the swarm's map (%d matches)", rid, w.matches)
         return True
+
+
+def _match(merged, own, contradicts, seen_at, images: bool) -> tuple[MapMatch, int]:
+    """``match_maps`` of a robot's map on the merged map, and the robots' sightings of
+    each other at the pose it found (0 without sightings)."""
+    m = match_maps(merged, own, contradicts, images)
+    return m, (seen_at(m.pose) if seen_at is not None and (m.accepted or m.ambiguous) else 0)

@@ -90,6 +90,9 @@ END_CONFIRM_CYCLES = 3
 # s) after the last frontier: matches every 5 s need a few more views of a shared place
 FRAME_WAIT_S = 120.0
 MERGE_PERIOD_S = 1.0  # robots' changed cells are merged at least this often (batched)
+# a robot drawn to a rendezvous counts a goal's distance from it this many times on top of
+# its path cost: equal weight sends it along the frontiers that lead there
+RENDEZVOUS_WEIGHT = 1.0
 # after a look, a frontier point farther than this from every frontier vector has moved
 # on (the view opened the space behind it); the look failed if most (LOOK_OPEN_SHARE)
 # of the frontier's points did not. A TurtleBot3 at a door sees 3.5 m into the room: the
@@ -192,6 +195,9 @@ class Coordinator:
         self.fetch_bytes = 0  # ... and the bytes they took
         self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
         self.frames_pending: tuple[str, ...] = ()  # robots exploring in frames of their own
+        # a robot exploring alone (``agents.anchoring``) is drawn towards this point (x m,
+        # y m, its frame): where its candidate frame puts another robot of the swarm
+        self.rendezvous_xy: tuple[float, float] | None = None
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -619,7 +625,7 @@ class Coordinator:
         goals = np.array([targets[t].goal for t in ids]).reshape(-1, 2)
         choice = assign(
             self.strategy,
-            costs,
+            self._drawn(costs, [targets[t].goal for t in ids]),
             utilities,
             current,
             self.cfg.explore.hysteresis,
@@ -658,6 +664,14 @@ class Coordinator:
                     float(costs[k, j]),
                     self.merged.version,
                 )
+
+    def _drawn(self, costs: np.ndarray, goals: list) -> np.ndarray:
+        """Path costs (metres), plus each goal's distance to ``rendezvous_xy`` when set:
+        the robot explores towards the rendezvous, the nearest frontiers first."""
+        if self.rendezvous_xy is None or not goals:
+            return costs
+        d = np.hypot(*(np.asarray(goals, dtype=float) - self.rendezvous_xy).T)
+        return costs + RENDEZVOUS_WEIGHT * d[None, :]
 
     def _watch_progress(self, live, ids, costs) -> None:
         timeout = self.cfg.explore.no_progress_timeout_s

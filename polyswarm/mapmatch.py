@@ -100,6 +100,9 @@ class MapMatch:
     refined: tuple = field(default=(), repr=False, compare=False)
     contradicted: int = 0  # candidate poses left out on evidence from outside the maps
     images_checked: bool = True  # against the pose's images under the maps' symmetries
+    # refused only because the maps fit elsewhere too (rivals, symmetric images): the
+    # maps agree at the pose, and sightings may yet tell it from the others
+    ambiguous: bool = False
 
     def summary(self) -> str:
         x, y, th = self.pose
@@ -408,7 +411,7 @@ def match_maps(
     if m.accepted and images:
         why = _symmetric_images(va, vb, m.pose, contradicts)
         if why:
-            return replace(m, accepted=False, reason=why)
+            return replace(m, accepted=False, reason=why, ambiguous=True)
     return replace(m, images_checked=images)
 
 
@@ -468,6 +471,7 @@ def _decide(refined: list, candidates: int, contradicted: int = 0) -> MapMatch:
         best,
         reason == "",
         reason,
+        ambiguous=reason.startswith("ambiguous"),
         rival_ratio=rival,
         candidates=candidates,
         margin_wall_m=margin_m,
@@ -495,38 +499,55 @@ def frame_error(est, truth) -> tuple[float, float]:
 AGREE_M, AGREE_RAD = 0.3, math.radians(3.0)  # two matches within this are the same frame
 AGREE_MATCHES = 2  # accepted matches in a row that must agree before a frame is committed
 REVISE_MATCHES = 3  # accepted matches in a row that agree on another frame: revise it
+# the robots must have seen each other where the frame puts them this many times (two
+# robots' sightings together, ``polyswarm.sighting.seen``) before it is committed: in a
+# building that looks the same after a quarter turn the maps fit a wrong image as well
+# as the truth, or better when SLAM drift bends one map (bench merge, 5 worlds x 5 seeds:
+# the wrong frames accepted had 0-3 sightings, 42 of 43 fewer than 3)
+MIN_SEEN = 3
 
 
 class FrameEstimate:
-    """One robot's frame in the shared one, from successive ``match_maps`` results.
+    """One robot's frame in the shared one, from successive ``match_maps`` results and
+    the robots' sightings of each other at them.
 
     One accepted match is not trusted: the frame is committed when ``AGREE_MATCHES``
-    accepted matches in a row (made as the maps grew) agree, the last one checked
-    against the pose's symmetric images. Once committed, accepted
-    matches that contradict it are counted; ``REVISE_MATCHES`` in a row that agree among
-    themselves replace it (a wrong merge undone). Matches that are not accepted change
-    nothing."""
+    matches in a row (made as the maps grew) agree, and at the last one the robots have
+    seen each other at least ``MIN_SEEN`` times where the frame puts them. A match the
+    maps alone leave ambiguous (they also fit at rivals or symmetric images) counts as
+    accepted when the sightings single it out. Once committed, accepted matches that
+    contradict it are counted; ``REVISE_MATCHES`` in a row that agree among themselves,
+    the last one seen, replace it (a wrong merge undone). Matches that are not accepted
+    change nothing.
+
+    ``candidate`` is the frame the latest accepted or ambiguous match proposes while none
+    is committed: where to look for the other robots (``agents.anchoring``)."""
 
     def __init__(self) -> None:
         self.pose: np.ndarray | None = None  # the committed frame
         self.run: list[np.ndarray] = []  # the latest accepted matches that agree
+        self.candidate: np.ndarray | None = None
         self.contradictions = 0
         self.revisions = 0
 
-    def add(self, m: MapMatch) -> np.ndarray | None:
-        """The committed frame after ``m``."""
-        if not m.accepted:
+    def add(self, m: MapMatch, seen: int = 0) -> np.ndarray | None:
+        """The committed frame after ``m``, at which the robots were seen ``seen`` times."""
+        sighted = seen >= MIN_SEEN
+        if m.accepted or m.ambiguous:
+            self.candidate = m.pose
+        if not (m.accepted or (m.ambiguous and sighted)):
             return self.pose
         if self.run and not _close(m.pose, self.run[-1], AGREE_M, AGREE_RAD):
             self.run = []
         self.run.append(m.pose)
         if self.pose is None:
-            if len(self.run) >= AGREE_MATCHES and m.images_checked:
+            # sightings at the pose rule out its images as well as the image check does
+            if len(self.run) >= AGREE_MATCHES and sighted and (m.images_checked or m.ambiguous):
                 self.pose = self.run[-1]
         elif _close(m.pose, self.pose, AGREE_M, AGREE_RAD):
             self.pose = m.pose  # the latest agreeing estimate (the maps grew)
         else:
             self.contradictions += 1
-            if len(self.run) >= REVISE_MATCHES:
+            if len(self.run) >= REVISE_MATCHES and sighted:
                 self.pose, self.revisions = self.run[-1], self.revisions + 1
         return self.pose

@@ -18,8 +18,10 @@ the places of that disc where a robot can stand count: along a corridor the disc
 always reaches a wall, whose returns would otherwise hide every prediction.
 
 ``seen`` counts the opposite, positive evidence: a return where the frame puts the other
-robot, clear of the viewer's walls. Robots exploring apart seldom see each other, so
-it is measured (``polyswarm bench merge``), not required.
+robot, clear of the viewer's walls. A frame is committed only once the robots have seen
+each other where it puts them (``polyswarm.mapmatch.FrameEstimate``); robots exploring
+apart seldom do, so the coordinator sends a waiting robot towards where its candidate
+frame puts the others (``agents.anchoring``).
 
 Assumed: robots are visible to each other's lidars (true of the simulator's robots and
 of TurtleBot-class robots, whose lidar heads sit at the same height), and the robots'
@@ -332,3 +334,12 @@ def contradictions(a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = 
     frame = np.asarray(frame, dtype=float)
     ra, rb = rooms if rooms is not None else (None, None)
     return unseen(a, b, frame, ra) + unseen(b, a, inverse(frame), rb)
+
+
+def mutual_seen(a: Track, b: Track, frame, maps) -> int:
+    """Moments where either robot saw the other where ``frame`` (B's frame in A's) puts
+    it (``seen`` both ways); ``maps``: A's and B's GridPolyMaps."""
+    frame = np.asarray(frame, dtype=float)
+    return seen(a, b, frame, no_wall_test(maps[0])) + seen(
+        b, a, inverse(frame), no_wall_test(maps[1])
+    )

@@ -8,7 +8,7 @@ import shapely
 from polyswarm.config import Config, RobotEntry, known_starts
 from polyswarm.mapmatch import transform_map
 from polyswarm.polymap import GridPolyMap, cells_digest
-from polyswarm.se2 import compose, relative
+from polyswarm.se2 import compose, inverse, relative, transform_points
 from polyswarm.slam import PolySlam
 
 
@@ -83,6 +83,7 @@ def test_a_robot_is_merged_only_after_agreeing_matches_and_its_own_move():
     solo = frames.owner("r2", main)
     assert solo is not main
     solo.on_robot_map("r2", b)
+    _see_each_other(frames, truth)
     sent = []
     now, give_up = 0.0, time.monotonic() + 120.0
     while time.monotonic() < give_up:  # matches every MATCH_PERIOD_S, in a worker
@@ -109,6 +110,69 @@ def test_a_robot_is_merged_only_after_agreeing_matches_and_its_own_move():
     main.flush()
     both = shapely.union(a.explored_region(), moved.explored_region()).area
     assert abs(main.merged.explored_area() - both) < 0.01 * both
+    frames.close()
+
+
+def _profile_with_a_robot_at(xy, clear_m: float = 10.0) -> bytes:
+    """A clear profile (``polyswarm.sighting``): clear to ``clear_m`` all around, and a
+    robot's body at ``xy`` (metres, the viewer's frame)."""
+    from polyswarm.sighting import BODY_M, CLEAR_UNIT_M, SECTORS, _sector
+
+    out = [int(clear_m / CLEAR_UNIT_M)] * SECTORS
+    d = float(np.hypot(*xy)) - BODY_M / 2
+    out[int(_sector(np.arctan2(xy[1], xy[0])))] = int(d / CLEAR_UNIT_M)
+    return bytes(out)
+
+
+def _see_each_other(frames, truth, moments: int = 6) -> None:
+    """r1 at the origin of the shared frame sees r2 standing at its own origin (which
+    ``truth`` puts in the shared frame), once a second."""
+    from protocols.messages import Pose
+
+    clear = _profile_with_a_robot_at(truth[:2])
+    for k in range(moments):
+        frames.sighted("r1", float(k), Pose(0.0, 0.0, 0.0, clear=clear))
+        frames.sighted("r2", float(k), Pose(0.0, 0.0, 0.0))
+
+
+def test_a_frame_the_robots_never_saw_each_other_at_is_not_committed_but_sought():
+    """The maps agree (the same maps as above), but the robots never saw each other:
+    nothing is committed, and the waiting robot is drawn to where the frame the
+    matches propose puts the other robot, in its own frame."""
+    import time
+
+    from shapely.geometry import box
+
+    from agents.anchoring import Anchoring
+    from agents.coordinator import Coordinator
+    from protocols.messages import Pose
+    from tests.test_mapmatch import _seen
+
+    truth = np.array([4.0, -3.0, 2.1])
+    cfg = Config()
+    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
+    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    main.on_pose("r1", 0.0, Pose(0.0, 0.0, 0.0))
+    main.on_alive("r1", True)
+    main.flush()
+    frames = Anchoring(cfg, ["r2"])
+    solo = frames.owner("r2", main)
+    solo.on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
+    solo.on_pose("r2", 0.0, Pose(0.0, 0.0, 0.0))
+    solo.on_alive("r2", True)
+    for k in range(6):  # in each other's view, but r1's scans say nothing (no profile)
+        frames.sighted("r1", float(k), Pose(0.0, 0.0, 0.0))
+        frames.sighted("r2", float(k), Pose(0.0, 0.0, 0.0))
+    now, sent, give_up = 0.0, [], time.monotonic() + 120.0
+    while frames.waiting["r2"].matches < 3 and time.monotonic() < give_up:
+        sent += frames.tick(main, now)
+        now += 1.0
+        time.sleep(0.05)
+    w = frames.waiting["r2"]
+    assert w.matches >= 3 and not sent and w.frames.pose is None
+    assert w.frames.candidate is not None
+    r1_in_r2s_frame = transform_points(inverse(truth), np.zeros((1, 2)))[0]
+    assert np.hypot(*(np.array(solo.rendezvous_xy) - r1_in_r2s_frame)) < 0.1
     frames.close()
 
 

@@ -10,6 +10,7 @@ import shapely
 from shapely.geometry import box
 
 from polyswarm.mapmatch import (
+    MIN_SEEN,
     FrameEstimate,
     MapMatch,
     frame_error,
@@ -115,36 +116,64 @@ def test_identical_rooms_in_a_row_are_ambiguous():
     assert "ambiguous" in m.reason, m.summary()
 
 
+SEEN = MIN_SEEN  # the robots saw each other where the frame puts them
+
+
 def _m(pose, accepted=True) -> MapMatch:
     return MapMatch(np.asarray(pose, dtype=float), accepted, "", 50.0, 30.0, 0.9, 0.0, 0.1, 1.0)
 
 
 def test_a_frame_is_committed_only_when_successive_matches_agree():
     f = FrameEstimate()
-    assert f.add(_m((1.0, 2.0, 0.1))) is None  # one match is not trusted
-    assert f.add(_m((5.0, 2.0, 0.1))) is None  # another frame: starts over
-    assert f.add(_m((0.0, 0.0, 0.0), accepted=False)) is None  # refused: changes nothing
-    got = f.add(_m((5.1, 2.0, 0.11)))
+    assert f.add(_m((1.0, 2.0, 0.1)), SEEN) is None  # one match is not trusted
+    assert f.add(_m((5.0, 2.0, 0.1)), SEEN) is None  # another frame: starts over
+    assert f.add(_m((0.0, 0.0, 0.0), accepted=False), SEEN) is None  # refused: changes nothing
+    got = f.add(_m((5.1, 2.0, 0.11)), SEEN)
     assert got is not None and np.allclose(got, (5.1, 2.0, 0.11))
+
+
+def test_a_frame_is_committed_only_where_the_robots_saw_each_other():
+    """Agreeing matches are not enough: in a building that looks the same after a
+    quarter turn they agree on a wrong image as readily as on the truth."""
+    f = FrameEstimate()
+    f.add(_m((1.0, 2.0, 0.1)), 0)
+    assert f.add(_m((1.0, 2.0, 0.1)), MIN_SEEN - 1) is None
+    assert np.allclose(f.candidate, (1.0, 2.0, 0.1))  # where to look for the others
+    assert f.add(_m((1.02, 2.0, 0.1)), MIN_SEEN) is not None
+
+
+def test_sightings_single_out_a_pose_the_maps_leave_ambiguous():
+    from dataclasses import replace
+
+    ambiguous = replace(_m((1.0, 2.0, 0.1), accepted=False), ambiguous=True)
+    f = FrameEstimate()
+    f.add(ambiguous, 0)
+    f.add(ambiguous, 0)
+    assert f.pose is None and f.run == []  # the maps alone: refused
+    f.add(ambiguous, MIN_SEEN)
+    assert f.add(ambiguous, MIN_SEEN) is not None
+    g = FrameEstimate()  # a refusal for any other reason is not rescued by sightings
+    g.add(_m((1.0, 2.0, 0.1), accepted=False), MIN_SEEN)
+    assert g.add(_m((1.0, 2.0, 0.1), accepted=False), MIN_SEEN) is None
 
 
 def test_a_frame_is_committed_only_by_a_match_checked_against_its_symmetric_images():
     from dataclasses import replace
 
     f = FrameEstimate()
-    f.add(_m((1.0, 2.0, 0.1)))
-    assert f.add(replace(_m((1.0, 2.0, 0.1)), images_checked=False)) is None
-    assert f.add(_m((1.02, 2.0, 0.1))) is not None  # the run goes on; this one may commit
+    f.add(_m((1.0, 2.0, 0.1)), SEEN)
+    assert f.add(replace(_m((1.0, 2.0, 0.1)), images_checked=False), SEEN) is None
+    assert f.add(_m((1.02, 2.0, 0.1)), SEEN) is not None  # the run goes on; this one may commit
 
 
 def test_a_committed_frame_is_revised_by_agreeing_contradictions_only():
     f = FrameEstimate()
-    f.add(_m((1.0, 0.0, 0.0)))
-    f.add(_m((1.0, 0.05, 0.0)))
-    f.add(_m((9.0, 0.0, 0.0)))  # one contradiction: kept
+    f.add(_m((1.0, 0.0, 0.0)), SEEN)
+    f.add(_m((1.0, 0.05, 0.0)), SEEN)
+    f.add(_m((9.0, 0.0, 0.0)), SEEN)  # one contradiction: kept
     assert np.allclose(f.pose, (1.0, 0.05, 0.0)) and f.contradictions == 1
-    f.add(_m((9.0, 0.1, 0.0)))
-    f.add(_m((9.1, 0.1, 0.0)))  # three in a row that agree: the frame was wrong
+    f.add(_m((9.0, 0.1, 0.0)), SEEN)
+    f.add(_m((9.1, 0.1, 0.0)), SEEN)  # three in a row that agree: the frame was wrong
     assert np.allclose(f.pose, (9.1, 0.1, 0.0)) and f.revisions == 1
 
 

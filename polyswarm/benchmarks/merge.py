@@ -109,8 +109,7 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
     """Both methods on robot 1's and robot k's maps at every moment."""
     from polyswarm.benchmarks.gridmerge import Features, match_grids
     from polyswarm.mapmatch import MIN_OVERLAP_M2, FrameEstimate, MatchError, match_maps
-    from polyswarm.se2 import inverse
-    from polyswarm.sighting import MIN_CONTRADICTIONS, Room, contradictions, no_wall_test, seen
+    from polyswarm.sighting import MIN_CONTRADICTIONS, Room, contradictions, mutual_seen
 
     frames = FrameEstimate()
     rows = []
@@ -141,12 +140,11 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
             row["ours"]["rival_ratio"] = m.rival_ratio
             row["ours"]["margin_wall_m"] = m.margin_wall_m
             row["ours"]["contradicted"] = m.contradicted
-            # the robots seen where the pose puts them (positive evidence; rare: robots
-            # that explore apart seldom see each other)
-            row["ours"]["seen"] = seen(seen_a, seen_b, m.pose, no_wall_test(a)) + seen(
-                seen_b, seen_a, inverse(np.asarray(m.pose)), no_wall_test(b)
-            )
-        committed = frames.add(m) if m is not None else frames.pose
+            row["ours"]["ambiguous"] = m.ambiguous
+            # the robots seen where the pose puts them (what commits a frame; robots that
+            # explore apart, as these recorded ones did, seldom see each other)
+            row["ours"]["seen"] = mutual_seen(seen_a, seen_b, m.pose, (a, b))
+        committed = frames.add(m, row["ours"]["seen"]) if m is not None else frames.pose
         row["committed"] = {"accepted": committed is not None, **_score(committed, truth)}
         for feat in Features:
             t0 = time.perf_counter()
