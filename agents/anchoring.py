@@ -14,7 +14,12 @@ Until the coordinator knows where that frame lies in the shared map frame:
   (``polyswarm.sighting``: the frame would put one robot where another's lidar looked
   and saw nothing); in a symmetric building that is what tells the truth from its
   rotated images;
-* once successive matches agree (``FrameEstimate``), the robot is sent an ``anchor``:
+* while a match proposes a frame, the robot is drawn towards where that frame puts the
+  nearest robot of the swarm (``rendezvous_xy`` of its solo coordinator): seen there, in
+  a few places, the robots confirm the frame; a wrong frame puts the other robot where
+  the robot finds nobody, and the sightings contradict it;
+* once successive matches agree and the robots saw each other, or the frame stood long
+  enough uncontradicted (``FrameEstimate``), the robot is sent an ``anchor``:
   the pose of its frame in the shared frame. It moves its pose graph, keyframes and pose
   by it; its map follows as a correction of every keyframe, which its solo coordinator
   replays like any other;
@@ -107,7 +112,7 @@ class Anchoring:
         out = []
         for rid, w in self.waiting.items():
             if w.matching is not None and w.matching.done():
-                self._took(rid, w, w.matching)
+                self._took(rid, w, w.matching, now_s)
                 w.matching = None
             if w.anchor is not None:
                 if now_s - w.anchor_sent_s >= RESEND_S:
@@ -157,7 +162,7 @@ class Anchoring:
         near = there[np.argmin(np.hypot(*(there - me[:2]).T))]
         solo.rendezvous_xy = (float(near[0]), float(near[1]))
 
-    def _took(self, rid: str, w: _Waiting, done: Future) -> None:
+    def _took(self, rid: str, w: _Waiting, done: Future, now_s: float) -> None:
         try:
             m, seen = done.result()
         except (MatchError, PolyswarmError) as e:
@@ -168,7 +173,7 @@ class Anchoring:
             return
         w.matches += 1
         before = w.frames.pose
-        w.frames.add(m, seen)
+        w.frames.add(m, seen, now_s)
         log.info(
             "map of %s against the merged map (match %d): %s, seen %d time(s)%s",
             rid,

@@ -67,6 +67,10 @@ WALL_CLEAR_M = 0.6
 # a robot's centre is at least this far from a wall of the map it stands in (TurtleBot3
 # Burger: 0.105 m; map walls are line fits, a few centimetres off)
 ROOM_CLEAR_M = 0.1
+# sightings count in places this far apart: a quarter turn (or more) about a point moves a
+# place within 0.8 m of it by at most 1.1 m (NEAR_M + BODY_M), a sighting's reach; three
+# places 1.5 m apart cannot all lie within 0.8 m of one point (their circle: 0.87 m)
+SEEN_APART_M = 1.5
 ROOM_RES_M = 0.1  # the raster of where a robot can stand
 DISC_STEP_M = 0.2  # the disc around a prediction is tried at places this far apart
 
@@ -279,7 +283,15 @@ def _unseen_in_room(poses: np.ndarray, clear: np.ndarray, p: np.ndarray, room: R
 def seen(viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.ndarray]) -> int:
     """Moments where the viewer's scan had a return where ``frame`` (the other robot's
     frame in the viewer's, x m, y m, rad) puts the other robot (within ``NEAR_M``, its
-    body ``BODY_M``) and its map has no wall there: the other robot, seen.
+    body ``BODY_M``) and its map has no wall there: the other robot, seen."""
+    return len(seen_where(viewer, other, frame, no_wall))
+
+
+def seen_where(
+    viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """``seen``'s moments as the places (n, 2) (metres, the viewer's frame) where the
+    frame put the other robot.
 
     ``no_wall``: (n, 2) points in the viewer's frame -> True where a point lies in the
     viewer's explored space farther than ``WALL_CLEAR_M`` from its walls
@@ -287,8 +299,8 @@ def seen(viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.
     again is positive evidence; silence (no return, or a wall) is none."""
     pred = _predictions(viewer, other, frame)
     if pred is None:
-        return 0
-    poses, clear, _, d, bearing = pred
+        return np.zeros((0, 2))
+    poses, clear, p, d, bearing = pred
     rows = np.arange(len(d))
     half = np.arcsin(NEAR_M / d)
     step = 2 * math.pi / SECTORS
@@ -304,14 +316,14 @@ def seen(viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.
         got[better] = np.column_stack([r, (s + 0.5) * step - math.pi])[better]
     hit = miss <= NEAR_M + BODY_M
     if not hit.any():
-        return 0
+        return np.zeros((0, 2))
     rng, heading = got[hit, 0], poses[hit, 2] + got[hit, 1]
     ray = np.column_stack([np.cos(heading), np.sin(heading)])
     q = poses[hit, :2] + rng[:, None] * ray
     # the return and the space just behind it (a robot's width on) are both clear of the
     # viewer's walls: a wall's return has its wall, and what lies behind it unexplored
     clear_of_walls = no_wall(np.vstack([q, q + 2 * BODY_M * ray]))
-    return int(np.sum(clear_of_walls[: len(q)] & clear_of_walls[len(q) :]))
+    return p[hit][clear_of_walls[: len(q)] & clear_of_walls[len(q) :]]
 
 
 def no_wall_test(pmap, clear_m: float = WALL_CLEAR_M) -> Callable[[np.ndarray], np.ndarray]:
@@ -337,9 +349,19 @@ def contradictions(a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = 
 
 
 def mutual_seen(a: Track, b: Track, frame, maps) -> int:
-    """Moments where either robot saw the other where ``frame`` (B's frame in A's) puts
-    it (``seen`` both ways); ``maps``: A's and B's GridPolyMaps."""
+    """Places, at least ``SEEN_APART_M`` apart, where either robot saw the other where
+    ``frame`` (B's frame in A's) puts it (``seen`` both ways); ``maps``: A's and B's
+    GridPolyMaps.
+
+    Places, not moments: a frame and its image under a rotation of the building (a
+    cross's quarter turn about its centre) put a robot in the same place only near the
+    rotation's centre. Seen there again and again, the robots tell the two apart no
+    better than seen once; seen in places a few metres apart, they do."""
     frame = np.asarray(frame, dtype=float)
-    return seen(a, b, frame, no_wall_test(maps[0])) + seen(
-        b, a, inverse(frame), no_wall_test(maps[1])
-    )
+    b_seen = seen_where(a, b, frame, no_wall_test(maps[0]))  # B, in A's frame
+    a_seen = seen_where(b, a, inverse(frame), no_wall_test(maps[1]))  # A, in B's frame
+    places: list[np.ndarray] = []
+    for xy in np.vstack([b_seen, transform_points(frame, a_seen)]):
+        if all(math.dist(xy, q) >= SEEN_APART_M for q in places):
+            places.append(xy)
+    return len(places)

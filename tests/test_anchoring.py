@@ -113,38 +113,32 @@ def test_a_robot_is_merged_only_after_agreeing_matches_and_its_own_move():
     frames.close()
 
 
-def _profile_with_a_robot_at(xy, clear_m: float = 10.0) -> bytes:
-    """A clear profile (``polyswarm.sighting``): clear to ``clear_m`` all around, and a
-    robot's body at ``xy`` (metres, the viewer's frame)."""
-    from polyswarm.sighting import BODY_M, CLEAR_UNIT_M, SECTORS, _sector
-
-    out = [int(clear_m / CLEAR_UNIT_M)] * SECTORS
-    d = float(np.hypot(*xy)) - BODY_M / 2
-    out[int(_sector(np.arctan2(xy[1], xy[0])))] = int(d / CLEAR_UNIT_M)
-    return bytes(out)
-
-
-def _see_each_other(frames, truth, moments: int = 6) -> None:
-    """r1 at the origin of the shared frame sees r2 standing at its own origin (which
-    ``truth`` puts in the shared frame), once a second."""
+def _see_each_other(frames, truth, moments: int = 7) -> None:
+    """r1 at the origin of the shared frame sees r2 drive 0.6 m a second from its own
+    origin (which ``truth`` puts at (4 m, -3 m) in the shared frame) through a room of
+    the building: 1.8 m along the shared x axis, then 1.8 m along -y."""
     from protocols.messages import Pose
+    from tests.test_sighting import profile_with_a_robot_at
 
-    clear = _profile_with_a_robot_at(truth[:2])
     for k in range(moments):
+        there = truth[:2] + 0.6 * np.array([min(k, 3), -max(k - 3, 0)])
+        mine = transform_points(inverse(truth), there[None])[0]
+        clear = profile_with_a_robot_at(there)
         frames.sighted("r1", float(k), Pose(0.0, 0.0, 0.0, clear=clear))
-        frames.sighted("r2", float(k), Pose(0.0, 0.0, 0.0))
+        frames.sighted("r2", float(k), Pose(*mine, 0.0))
 
 
-def test_a_frame_the_robots_never_saw_each_other_at_is_not_committed_but_sought():
+def test_a_frame_the_robots_never_saw_each_other_at_is_sought_before_it_is_committed():
     """The maps agree (the same maps as above), but the robots never saw each other:
-    nothing is committed, and the waiting robot is drawn to where the frame the
+    nothing is committed at once, and the waiting robot is drawn to where the frame the
     matches propose puts the other robot, in its own frame."""
     import time
 
     from shapely.geometry import box
 
-    from agents.anchoring import Anchoring
+    from agents.anchoring import MATCH_PERIOD_S, Anchoring
     from agents.coordinator import Coordinator
+    from polyswarm.mapmatch import VERIFY_S
     from protocols.messages import Pose
     from tests.test_mapmatch import _seen
 
@@ -163,16 +157,24 @@ def test_a_frame_the_robots_never_saw_each_other_at_is_not_committed_but_sought(
     for k in range(6):  # in each other's view, but r1's scans say nothing (no profile)
         frames.sighted("r1", float(k), Pose(0.0, 0.0, 0.0))
         frames.sighted("r2", float(k), Pose(0.0, 0.0, 0.0))
-    now, sent, give_up = 0.0, [], time.monotonic() + 120.0
-    while frames.waiting["r2"].matches < 3 and time.monotonic() < give_up:
-        sent += frames.tick(main, now)
-        now += 1.0
-        time.sleep(0.05)
     w = frames.waiting["r2"]
-    assert w.matches >= 3 and not sent and w.frames.pose is None
-    assert w.frames.candidate is not None
+
+    def tick_until(done) -> list:
+        now, sent, give_up = 0.0, [], time.monotonic() + 120.0
+        while not done(now) and time.monotonic() < give_up:
+            sent += frames.tick(main, now)
+            if w.matching is None:  # simulated time runs on between matches only
+                now += MATCH_PERIOD_S
+            time.sleep(0.05)
+        return sent
+
+    assert not tick_until(lambda now: w.matches >= 3)
+    assert w.frames.pose is None and w.frames.candidate is not None
     r1_in_r2s_frame = transform_points(inverse(truth), np.zeros((1, 2)))[0]
     assert np.hypot(*(np.array(solo.rendezvous_xy) - r1_in_r2s_frame)) < 0.1
+    # nobody ever contradicted it: once it stood VERIFY_S, the frame is committed
+    sent = tick_until(lambda now: w.frames.pose is not None or now > 2 * VERIFY_S)
+    assert w.frames.pose is not None and sent and sent[0][0] == "r2"
     frames.close()
 
 

@@ -11,6 +11,7 @@ from shapely.geometry import box
 
 from polyswarm.mapmatch import (
     MIN_SEEN,
+    VERIFY_S,
     FrameEstimate,
     MapMatch,
     frame_error,
@@ -140,6 +141,19 @@ def test_a_frame_is_committed_only_where_the_robots_saw_each_other():
     assert f.add(_m((1.0, 2.0, 0.1)), MIN_SEEN - 1) is None
     assert np.allclose(f.candidate, (1.0, 2.0, 0.1))  # where to look for the others
     assert f.add(_m((1.02, 2.0, 0.1)), MIN_SEEN) is not None
+
+
+def test_unseen_a_frame_is_committed_once_it_stood_uncontradicted_long_enough():
+    """Robots that cannot reach each other must still merge: a run of agreeing matches
+    that stood ``VERIFY_S`` while the robot was sent to look commits the frame."""
+    f = FrameEstimate()
+    f.add(_m((1.0, 2.0, 0.1)), 0, now_s=10.0)
+    assert f.add(_m((1.0, 2.0, 0.1)), 0, now_s=10.0 + VERIFY_S - 5.0) is None
+    assert f.add(_m((1.0, 2.0, 0.1)), 0, now_s=10.0 + VERIFY_S) is not None
+    g = FrameEstimate()  # a run that started over is timed afresh
+    g.add(_m((1.0, 2.0, 0.1)), 0, now_s=0.0)
+    g.add(_m((9.0, 2.0, 0.1)), 0, now_s=VERIFY_S - 5.0)
+    assert g.add(_m((9.0, 2.0, 0.1)), 0, now_s=VERIFY_S + 5.0) is None
 
 
 def test_sightings_single_out_a_pose_the_maps_leave_ambiguous():

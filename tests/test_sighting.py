@@ -21,6 +21,7 @@ from polyswarm.sighting import (
     Track,
     clear_profile,
     contradictions,
+    mutual_seen,
     no_wall_test,
     seen,
     unseen,
@@ -114,6 +115,39 @@ def test_along_a_corridor_only_where_a_robot_can_stand_is_looked_at():
     assert seen(seen_track, other, centre, no_wall) == 6
     assert seen(viewer, other, centre, no_wall) == 0  # the returns there are the walls'
     assert WALL_CLEAR_M < 1.0  # the corridor's middle is farther than that from its walls
+
+
+def profile_with_a_robot_at(xy, clear_m: float = 10.0) -> bytes:
+    """A clear profile: clear to ``clear_m`` all around, and a robot's body at ``xy``
+    (metres, the viewer's frame)."""
+    from polyswarm.sighting import BODY_M, _sector
+
+    out = [int(clear_m / CLEAR_UNIT_M)] * SECTORS
+    d = float(np.hypot(*xy)) - BODY_M / 2
+    out[int(_sector(np.arctan2(xy[1], xy[0])))] = int(d / CLEAR_UNIT_M)
+    return bytes(out)
+
+
+def test_sightings_count_in_places_not_moments():
+    """A robot seen six times standing in one place tells a frame from its rotations
+    about that place no better than seen once; seen in three places 1.5 m apart, no
+    quarter turn about any point explains them all."""
+    room = box(-1, -8, 16, 9)
+    hall = GridPolyMap.from_polygons(_typed(room, room.boundary), CELL_M)
+    a, still, moving = Track(), Track(), Track()
+    for k in range(6):
+        there = (5.0, 1.5 * (k // 2))  # two moments in each of three places
+        a.add(Sighting(float(k), (0.0, 0.0, 0.0), profile_with_a_robot_at(there)))
+        moving.add(Sighting(float(k), (*there, 0.0)))
+    b = Track()
+    for k in range(6):
+        still.add(Sighting(float(k), (5.0, 0.0, 0.0)))
+        b.add(Sighting(float(k), (0.0, 0.0, 0.0), profile_with_a_robot_at((5.0, 0.0))))
+    identity = (0.0, 0.0, 0.0)
+    assert seen(b, still, identity, no_wall_test(hall)) == 6
+    assert mutual_seen(b, still, identity, (hall, hall)) == 1
+    assert seen(a, moving, identity, no_wall_test(hall)) == 6
+    assert mutual_seen(a, moving, identity, (hall, hall)) == 3
 
 
 def _scan(pose, others) -> np.ndarray:

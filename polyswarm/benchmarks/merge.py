@@ -144,7 +144,7 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
             # the robots seen where the pose puts them (what commits a frame; robots that
             # explore apart, as these recorded ones did, seldom see each other)
             row["ours"]["seen"] = mutual_seen(seen_a, seen_b, m.pose, (a, b))
-        committed = frames.add(m, row["ours"]["seen"]) if m is not None else frames.pose
+        committed = frames.add(m, row["ours"]["seen"], t) if m is not None else frames.pose
         row["committed"] = {"accepted": committed is not None, **_score(committed, truth)}
         for feat in Features:
             t0 = time.perf_counter()
