@@ -8,7 +8,10 @@ frame (its start is its origin), and robot k's map is matched against robot 1's 
 * polyswarm's ``match_maps`` (search, ICP, free-space verification; ``mapmatch``), with
   the robots' sightings up to that moment (``sighting``: each agent sends its scan's clear
   profile with a pose a second, as robots do while a frame is unknown), and the
-  ``FrameEstimate`` that commits a frame once successive matches agree;
+  ``FrameEstimate`` that commits a frame once successive matches agree and the robots
+  saw each other where it puts them, or it stood ``VERIFY_S`` uncontradicted. These
+  recorded robots explore without the coordinator's rendezvous (a launch sends a waiting
+  robot to look for the others): their sightings are the ones exploration gives;
 * the peer method, ``multirobot_map_merge``'s feature-based grid merging
   (``gridmerge``: AKAZE, its hard-coded choice, and ORB) on the same maps rasterised at
   5 cm, at several confidence thresholds (its default is 1.0), so that its best
