@@ -49,6 +49,7 @@ from polyswarm.sighting import (
     Sighting,
     Track,
     contradictions,
+    distinct_places,
     mutual_seen,
 )
 from protocols.messages import Anchor, Pose
@@ -218,8 +219,8 @@ class Anchoring:
             n = sum(contradictions(t, mine, frame, (rooms[0], rooms[1])) for t in theirs)
             return n >= MIN_CONTRADICTIONS
 
-        def seen_at(frame: np.ndarray) -> int:
-            return sum(mutual_seen(t, mine, frame, maps) for t in theirs)
+        def seen_at(frame: np.ndarray) -> int:  # places in the shared frame, all robots'
+            return distinct_places(np.vstack([mutual_seen(t, mine, frame, maps) for t in theirs]))
 
         return contradicts, seen_at
 

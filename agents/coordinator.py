@@ -625,7 +625,7 @@ class Coordinator:
         goals = np.array([targets[t].goal for t in ids]).reshape(-1, 2)
         choice = assign(
             self.strategy,
-            self._drawn(costs, [targets[t].goal for t in ids]),
+            self._drawn(costs, goals),
             utilities,
             current,
             self.cfg.explore.hysteresis,
@@ -665,12 +665,12 @@ class Coordinator:
                     self.merged.version,
                 )
 
-    def _drawn(self, costs: np.ndarray, goals: list) -> np.ndarray:
-        """Path costs (metres), plus each goal's distance to ``rendezvous_xy`` when set:
-        the robot explores towards the rendezvous, the nearest frontiers first."""
-        if self.rendezvous_xy is None or not goals:
+    def _drawn(self, costs: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Path costs (metres), plus each goal's (targets x 2) distance to
+        ``rendezvous_xy`` when set: the robot explores towards the rendezvous."""
+        if self.rendezvous_xy is None:
             return costs
-        d = np.hypot(*(np.asarray(goals, dtype=float) - self.rendezvous_xy).T)
+        d = np.hypot(*(goals - self.rendezvous_xy).T)
         return costs + RENDEZVOUS_WEIGHT * d[None, :]
 
     def _watch_progress(self, live, ids, costs) -> None:

@@ -500,7 +500,7 @@ AGREE_M, AGREE_RAD = 0.3, math.radians(3.0)  # two matches within this are the s
 AGREE_MATCHES = 2  # accepted matches in a row that must agree before a frame is committed
 REVISE_MATCHES = 3  # accepted matches in a row that agree on another frame: revise it
 # the robots must have seen each other in this many places where the frame puts them
-# (``polyswarm.sighting.mutual_seen``) before it is committed at once: in a building that
+# (``polyswarm.sighting.distinct_places``) before it is committed at once: in a building that
 # looks the same after a quarter turn the maps fit a wrong image as well as the truth,
 # or better when SLAM drift bends one map (bench merge, 5 worlds x 5 seeds: at the 43
 # wrong poses accepted the robots were seen in 0-2 places, at 55 of 136 right ones in 3-13)

@@ -19,7 +19,7 @@ always reaches a wall, whose returns would otherwise hide every prediction.
 
 ``seen`` counts the opposite, positive evidence: a return where the frame puts the other
 robot, clear of the viewer's walls. A frame is committed at once when the robots have
-seen each other in a few places where it puts them (``mutual_seen``;
+seen each other in a few places where it puts them (``distinct_places``;
 ``polyswarm.mapmatch.FrameEstimate``), otherwise only after it stood a while
 uncontradicted; robots exploring apart seldom see each other, so the coordinator sends a
 waiting robot towards where its candidate frame puts the others (``agents.anchoring``).
@@ -349,20 +349,25 @@ def contradictions(a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = 
     return unseen(a, b, frame, ra) + unseen(b, a, inverse(frame), rb)
 
 
-def mutual_seen(a: Track, b: Track, frame, maps) -> int:
-    """Places, at least ``SEEN_APART_M`` apart, where either robot saw the other where
-    ``frame`` (B's frame in A's) puts it (``seen`` both ways); ``maps``: A's and B's
-    GridPolyMaps.
+def mutual_seen(a: Track, b: Track, frame, maps) -> np.ndarray:
+    """Where either robot saw the other where ``frame`` (B's frame in A's) puts it
+    (``seen`` both ways): the seen robot's places (n, 2), metres, in A's frame. ``maps``:
+    A's and B's GridPolyMaps. Count them with ``distinct_places``."""
+    frame = np.asarray(frame, dtype=float)
+    b_seen = seen_where(a, b, frame, no_wall_test(maps[0]))  # B, in A's frame
+    a_seen = seen_where(b, a, inverse(frame), no_wall_test(maps[1]))  # A, in B's frame
+    return np.vstack([b_seen, transform_points(frame, a_seen)])
+
+
+def distinct_places(xy: np.ndarray) -> int:
+    """How many of the places ``xy`` (n, 2) lie at least ``SEEN_APART_M`` apart (greedy).
 
     Places, not moments: a frame and its image under a rotation of the building (a
     cross's quarter turn about its centre) put a robot in the same place only near the
     rotation's centre. Seen there again and again, the robots tell the two apart no
     better than seen once; seen in places a few metres apart, they do."""
-    frame = np.asarray(frame, dtype=float)
-    b_seen = seen_where(a, b, frame, no_wall_test(maps[0]))  # B, in A's frame
-    a_seen = seen_where(b, a, inverse(frame), no_wall_test(maps[1]))  # A, in B's frame
     places: list[np.ndarray] = []
-    for xy in np.vstack([b_seen, transform_points(frame, a_seen)]):
-        if all(math.dist(xy, q) >= SEEN_APART_M for q in places):
-            places.append(xy)
+    for p in np.asarray(xy, dtype=float).reshape(-1, 2):
+        if all(math.dist(p, q) >= SEEN_APART_M for q in places):
+            places.append(p)
     return len(places)

@@ -21,6 +21,7 @@ from polyswarm.sighting import (
     Track,
     clear_profile,
     contradictions,
+    distinct_places,
     mutual_seen,
     no_wall_test,
     seen,
@@ -145,9 +146,9 @@ def test_sightings_count_in_places_not_moments():
         b.add(Sighting(float(k), (0.0, 0.0, 0.0), profile_with_a_robot_at((5.0, 0.0))))
     identity = (0.0, 0.0, 0.0)
     assert seen(b, still, identity, no_wall_test(hall)) == 6
-    assert mutual_seen(b, still, identity, (hall, hall)) == 1
+    assert distinct_places(mutual_seen(b, still, identity, (hall, hall))) == 1
     assert seen(a, moving, identity, no_wall_test(hall)) == 6
-    assert mutual_seen(a, moving, identity, (hall, hall)) == 3
+    assert distinct_places(mutual_seen(a, moving, identity, (hall, hall))) == 3
 
 
 def _scan(pose, others) -> np.ndarray:

@@ -112,7 +112,13 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
     """Both methods on robot 1's and robot k's maps at every moment."""
     from polyswarm.benchmarks.gridmerge import Features, match_grids
     from polyswarm.mapmatch import MIN_OVERLAP_M2, FrameEstimate, MatchError, match_maps
-    from polyswarm.sighting import MIN_CONTRADICTIONS, Room, contradictions, mutual_seen
+    from polyswarm.sighting import (
+        MIN_CONTRADICTIONS,
+        Room,
+        contradictions,
+        distinct_places,
+        mutual_seen,
+    )
 
     frames = FrameEstimate()
     rows = []
@@ -146,7 +152,7 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
             row["ours"]["ambiguous"] = m.ambiguous
             # the robots seen where the pose puts them (what commits a frame; robots that
             # explore apart, as these recorded ones did, seldom see each other)
-            row["ours"]["seen"] = mutual_seen(seen_a, seen_b, m.pose, (a, b))
+            row["ours"]["seen"] = distinct_places(mutual_seen(seen_a, seen_b, m.pose, (a, b)))
         committed = frames.add(m, row["ours"]["seen"], t) if m is not None else frames.pose
         row["committed"] = {"accepted": committed is not None, **_score(committed, truth)}
         for feat in Features:
