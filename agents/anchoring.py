@@ -15,11 +15,12 @@ Until the coordinator knows where that frame lies in the shared map frame:
   and saw nothing); in a symmetric building that is what tells the truth from its
   rotated images;
 * while a match proposes a frame, the robot is drawn towards where that frame puts the
-  nearest robot of the swarm (``rendezvous_xy`` of its solo coordinator): seen there, in
-  a few places, the robots confirm the frame; a wrong frame puts the other robot where
-  the robot finds nobody, and the sightings contradict it;
-* once successive matches agree and the robots saw each other, or the frame stood long
-  enough uncontradicted (``FrameEstimate``), the robot is sent an ``anchor``:
+  nearest robot of the swarm, and that robot towards where the frame puts it
+  (``Coordinator.rendezvous`` of both coordinators): seen there, in a few places, the
+  robots confirm the frame; a wrong frame puts the other robot where the robot finds
+  nobody, and the sightings contradict it;
+* once successive matches agree and the robots saw each other where they put them
+  (``FrameEstimate``), the robot is sent an ``anchor``:
   the pose of its frame in the shared frame. It moves its pose graph, keyframes and pose
   by it; its map follows as a correction of every keyframe, which its solo coordinator
   replays like any other;
@@ -111,9 +112,10 @@ class Anchoring:
     def tick(self, main, now_s: float) -> list[tuple[str, Anchor]]:
         """Start the matches that are due, take the finished ones; the anchors to send."""
         out = []
+        main.rendezvous = {}  # drawn afresh for the robots still waiting
         for rid, w in self.waiting.items():
             if w.matching is not None and w.matching.done():
-                self._took(rid, w, w.matching, now_s)
+                self._took(rid, w, w.matching)
                 w.matching = None
             if w.anchor is not None:
                 if now_s - w.anchor_sent_s >= RESEND_S:
@@ -121,6 +123,7 @@ class Anchoring:
                     out.append((rid, w.anchor))
                 continue
             if w.frames.pose is not None:  # committed: anchor it
+                w.solo.rendezvous = {}
                 x, y, th = (float(v) for v in w.frames.pose)
                 w.anchor, w.anchor_sent_s = Anchor(1, x, y, th), now_s
                 log.info(
@@ -149,21 +152,24 @@ class Anchoring:
 
     def _rendezvous(self, rid: str, w: _Waiting, main) -> None:
         """Send a waiting robot towards where its candidate frame puts the nearest
-        robot of the swarm (in its own frame): if the frame is right they see each other
-        there and the frame is committed; if not, the robot finds the place empty (or a
-        wall), the sightings contradict the frame and the next match leaves it out."""
+        robot of the swarm (in its own frame), and that robot towards where the frame puts
+        the waiting one (in the shared frame): if the frame is right they see each other
+        and the frame is committed; if not, they find the place empty (or a wall), the
+        sightings contradict the frame and the next match leaves it out."""
         solo = w.solo
         me = solo.robots[rid].pose
         frame = w.frames.candidate
-        others = [r.pose for r in main.robots.values() if r.alive and r.pose is not None]
+        others = [r for r in main.robots.values() if r.alive and r.pose is not None]
+        solo.rendezvous = {}
         if frame is None or me is None or not others:
-            solo.rendezvous_xy = None
             return
-        there = transform_points(inverse(frame), np.array([p[:2] for p in others]))
-        near = there[np.argmin(np.hypot(*(there - me[:2]).T))]
-        solo.rendezvous_xy = (float(near[0]), float(near[1]))
+        there = transform_points(inverse(frame), np.array([r.pose[:2] for r in others]))
+        k = int(np.argmin(np.hypot(*(there - me[:2]).T)))
+        solo.rendezvous[rid] = (float(there[k][0]), float(there[k][1]))
+        x, y = transform_points(frame, me[None, :2])[0]
+        main.rendezvous[others[k].id] = (float(x), float(y))
 
-    def _took(self, rid: str, w: _Waiting, done: Future, now_s: float) -> None:
+    def _took(self, rid: str, w: _Waiting, done: Future) -> None:
         try:
             m, seen = done.result()
         except (MatchError, PolyswarmError) as e:
@@ -174,7 +180,7 @@ class Anchoring:
             return
         w.matches += 1
         before = w.frames.pose
-        w.frames.add(m, seen, now_s)
+        w.frames.add(m, seen)
         log.info(
             "map of %s against the merged map (match %d): %s, seen %d time(s)%s",
             rid,

@@ -195,9 +195,10 @@ class Coordinator:
         self.fetch_bytes = 0  # ... and the bytes they took
         self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
         self.frames_pending: tuple[str, ...] = ()  # robots exploring in frames of their own
-        # a robot exploring alone (``agents.anchoring``) is drawn towards this point (x m,
-        # y m, its frame): where its candidate frame puts another robot of the swarm
-        self.rendezvous_xy: tuple[float, float] | None = None
+        # robots drawn to a rendezvous (``agents.anchoring``): robot -> point (x m, y m, in
+        # this coordinator's frame). A robot exploring alone is drawn to where its candidate
+        # frame puts the nearest robot of the swarm; that robot, to where the frame puts it
+        self.rendezvous: dict[str, tuple[float, float]] = {}
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -625,7 +626,7 @@ class Coordinator:
         goals = np.array([targets[t].goal for t in ids]).reshape(-1, 2)
         choice = assign(
             self.strategy,
-            self._drawn(costs, goals),
+            self._drawn(costs, goals, live),
             utilities,
             current,
             self.cfg.explore.hysteresis,
@@ -665,13 +666,17 @@ class Coordinator:
                     self.merged.version,
                 )
 
-    def _drawn(self, costs: np.ndarray, goals: np.ndarray) -> np.ndarray:
-        """Path costs (metres), plus each goal's (targets x 2) distance to
-        ``rendezvous_xy`` when set: the robot explores towards the rendezvous."""
-        if self.rendezvous_xy is None:
+    def _drawn(self, costs: np.ndarray, goals: np.ndarray, live) -> np.ndarray:
+        """Path costs (metres, robots x targets), plus for a robot with a ``rendezvous``
+        each goal's (targets x 2) distance to it: the robot explores towards it."""
+        if not self.rendezvous:
             return costs
-        d = np.hypot(*(goals - self.rendezvous_xy).T)
-        return costs + RENDEZVOUS_WEIGHT * d[None, :]
+        out = costs.copy()
+        for k, r in enumerate(live):
+            xy = self.rendezvous.get(r.id)
+            if xy is not None:
+                out[k] += RENDEZVOUS_WEIGHT * np.hypot(*(goals - xy).T)
+        return out
 
     def _watch_progress(self, live, ids, costs) -> None:
         timeout = self.cfg.explore.no_progress_timeout_s

@@ -500,16 +500,14 @@ AGREE_M, AGREE_RAD = 0.3, math.radians(3.0)  # two matches within this are the s
 AGREE_MATCHES = 2  # accepted matches in a row that must agree before a frame is committed
 REVISE_MATCHES = 3  # accepted matches in a row that agree on another frame: revise it
 # the robots must have seen each other in this many places where the frame puts them
-# (``polyswarm.sighting.distinct_places``) before it is committed at once: in a building that
-# looks the same after a quarter turn the maps fit a wrong image as well as the truth,
-# or better when SLAM drift bends one map (bench merge, 5 worlds x 5 seeds: at the 43
-# wrong poses accepted the robots were seen in 0-2 places, at 55 of 136 right ones in 3-13)
+# (``polyswarm.sighting.distinct_places``) before it is committed: in a building that looks
+# the same after a quarter turn the maps fit a wrong image as well as the truth, or better
+# when SLAM drift bends one map (bench merge, 5 worlds x 5 seeds: at the 43 wrong poses
+# accepted the robots were seen in 0-2 places, at 55 of 136 right ones in 3-13). Nothing
+# else commits a frame: standing 60 s uncontradicted (an earlier rule, for robots that
+# cannot reach each other) committed 3 frames unseen in 16 launches, 2 of them 30 m and
+# 90 deg off (loop and cross seed 2, explore-unknown-start-rv-seeds2-4.json)
 MIN_SEEN = 3
-# ... or the frame stood this long (simulated s) without a contradiction while the robot
-# was sent to see the others (``agents.anchoring``): robots that cannot reach each other
-# (rooms joined by doors too narrow to plan through) must still merge. 30 m at the
-# thesis robot's 0.5 m/s: far enough to bring a wrong frame's prediction into view
-VERIFY_S = 60.0
 
 
 class FrameEstimate:
@@ -517,10 +515,11 @@ class FrameEstimate:
     the robots' sightings of each other at them.
 
     One accepted match is not trusted: the frame is committed when ``AGREE_MATCHES``
-    matches in a row (made as the maps grew) agree, and either the robots saw each other
-    in ``MIN_SEEN`` places where the last one puts them, or the run of agreeing matches
-    has stood for ``VERIFY_S``. A match the maps alone leave ambiguous (they also fit at
-    rivals or symmetric images) counts as accepted when the sightings single it out.
+    matches in a row (made as the maps grew) agree and the robots saw each other in
+    ``MIN_SEEN`` places where the last one puts them. Silence commits nothing: robots
+    that never see each other are not merged (``agents.anchoring`` sends them to meet).
+    A match the maps alone leave ambiguous (they also fit at rivals or symmetric images)
+    counts as accepted when the sightings single it out.
     Once committed, accepted matches that contradict it are counted; ``REVISE_MATCHES``
     in a row that agree among themselves replace it (a wrong merge undone). Matches that
     are not accepted change nothing.
@@ -531,14 +530,13 @@ class FrameEstimate:
     def __init__(self) -> None:
         self.pose: np.ndarray | None = None  # the committed frame
         self.run: list[np.ndarray] = []  # the latest accepted matches that agree
-        self.run_since_s = -math.inf  # when the first of them was made (simulated s)
         self.candidate: np.ndarray | None = None
         self.contradictions = 0
         self.revisions = 0
 
-    def add(self, m: MapMatch, seen: int = 0, now_s: float = 0.0) -> np.ndarray | None:
-        """The committed frame after ``m``, made at ``now_s``, at whose pose the robots
-        saw each other in ``seen`` places."""
+    def add(self, m: MapMatch, seen: int = 0) -> np.ndarray | None:
+        """The committed frame after ``m``, at whose pose the robots saw each other in
+        ``seen`` places."""
         sighted = seen >= MIN_SEEN
         if m.accepted or m.ambiguous:
             self.candidate = m.pose
@@ -546,19 +544,16 @@ class FrameEstimate:
             return self.pose
         if self.run and not _close(m.pose, self.run[-1], AGREE_M, AGREE_RAD):
             self.run = []
-        if not self.run:
-            self.run_since_s = now_s
         self.run.append(m.pose)
-        verified = sighted or now_s - self.run_since_s >= VERIFY_S
         if self.pose is None:
             # sightings at the pose rule out its images as well as the image check does
             checked = m.images_checked or (m.ambiguous and sighted)
-            if len(self.run) >= AGREE_MATCHES and checked and verified:
+            if len(self.run) >= AGREE_MATCHES and checked and sighted:
                 self.pose = self.run[-1]
         elif _close(m.pose, self.pose, AGREE_M, AGREE_RAD):
             self.pose = m.pose  # the latest agreeing estimate (the maps grew)
         else:
             self.contradictions += 1
-            if len(self.run) >= REVISE_MATCHES and verified:
+            if len(self.run) >= REVISE_MATCHES and sighted:
                 self.pose, self.revisions = self.run[-1], self.revisions + 1
         return self.pose

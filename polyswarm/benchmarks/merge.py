@@ -9,9 +9,9 @@ frame (its start is its origin), and robot k's map is matched against robot 1's 
   the robots' sightings up to that moment (``sighting``: each agent sends its scan's clear
   profile with a pose a second, as robots do while a frame is unknown), and the
   ``FrameEstimate`` that commits a frame once successive matches agree and the robots
-  saw each other where it puts them, or it stood ``VERIFY_S`` uncontradicted. These
-  recorded robots explore without the coordinator's rendezvous (a launch sends a waiting
-  robot to look for the others): their sightings are the ones exploration gives;
+  saw each other where it puts them. These recorded robots explore without the
+  coordinator's rendezvous (a launch sends a waiting robot and the nearest other to meet
+  each other): their sightings are the ones exploration gives;
 * the peer method, ``multirobot_map_merge``'s feature-based grid merging
   (``gridmerge``: AKAZE, its hard-coded choice, and ORB) on the same maps rasterised at
   5 cm, at several confidence thresholds (its default is 1.0), so that its best
@@ -153,7 +153,7 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
             # the robots seen where the pose puts them (what commits a frame; robots that
             # explore apart, as these recorded ones did, seldom see each other)
             row["ours"]["seen"] = distinct_places(mutual_seen(seen_a, seen_b, m.pose, (a, b)))
-        committed = frames.add(m, row["ours"]["seen"], t) if m is not None else frames.pose
+        committed = frames.add(m, row["ours"]["seen"]) if m is not None else frames.pose
         row["committed"] = {"accepted": committed is not None, **_score(committed, truth)}
         for feat in Features:
             t0 = time.perf_counter()
