@@ -7,9 +7,9 @@ Until the coordinator knows where that frame lies in the shared map frame:
   poses and status, and assigns it frontiers of its map, in its frame. Nothing of it
   enters the merged map, and the other robots are not planned around it;
 * every ``MATCH_PERIOD_S`` its map is matched with the merged map
-  (``polyswarm.mapmatch.match_maps``, in a worker thread: a match takes 0.3-2.5 s,
-  about three times that when it could commit the frame and the pose's symmetric
-  images are checked), and every match, accepted or not, is logged with its evidence;
+  (``polyswarm.mapmatch.match_maps``, in a worker thread: a match takes 0.3-2.5 s;
+  the pose's symmetric images are not checked, the sightings that commit a frame rule
+  them out), and every match, accepted or not, is logged with its evidence;
 * a match's candidate poses that the robots' sightings contradict are left out
   (``polyswarm.sighting``: the frame would put one robot where another's lidar looked
   and saw nothing); in a symmetric building that is what tells the truth from its
@@ -42,7 +42,7 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
-from polyswarm.mapmatch import AGREE_MATCHES, FrameEstimate, MapMatch, MatchError, match_maps
+from polyswarm.mapmatch import FrameEstimate, MapMatch, MatchError, match_maps
 from polyswarm.se2 import inverse, transform_points
 from polyswarm.sighting import (
     MIN_CONTRADICTIONS,
@@ -140,13 +140,8 @@ class Anchoring:
                 and main.merged.explored_area() >= MIN_MAP_M2
             ):
                 w.last_match_s = now_s
-                # the symmetric images are checked (two more searches) only on a match
-                # that could commit the frame
-                decisive = len(w.frames.run) >= AGREE_MATCHES - 1
                 contradicts, seen_at = self._evidence(rid, main)
-                w.matching = self._pool.submit(
-                    _match, main.merged, own, contradicts, seen_at, decisive
-                )
+                w.matching = self._pool.submit(_match, main.merged, own, contradicts, seen_at)
             self._rendezvous(rid, w, main)
         return out
 
@@ -263,8 +258,9 @@ class Anchoring:
         return True
 
 
-def _match(merged, own, contradicts, seen_at, images: bool) -> tuple[MapMatch, int]:
-    """``match_maps`` of a robot's map on the merged map, and the robots' sightings of
-    each other at the pose it found (0 without sightings)."""
-    m = match_maps(merged, own, contradicts, images)
+def _match(merged, own, contradicts, seen_at) -> tuple[MapMatch, int]:
+    """``match_maps`` of a robot's map on the merged map (its images unchecked: two more
+    searches, three times the time, to tell what the sightings tell), and the robots'
+    sightings of each other at the pose it found (0 without sightings)."""
+    m = match_maps(merged, own, contradicts, images=False)
     return m, (seen_at(m.pose) if seen_at is not None and (m.accepted or m.ambiguous) else 0)

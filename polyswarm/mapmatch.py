@@ -99,7 +99,6 @@ class MapMatch:
     # the refined poses with their evidence, best first
     refined: tuple = field(default=(), repr=False, compare=False)
     contradicted: int = 0  # candidate poses left out on evidence from outside the maps
-    images_checked: bool = True  # against the pose's images under the maps' symmetries
     # refused only because the maps fit elsewhere too (rivals, symmetric images): the
     # maps agree at the pose, and sightings may yet tell it from the others
     ambiguous: bool = False
@@ -375,8 +374,9 @@ def match_maps(
     on silence.
 
     ``images``: check an accepted pose against its images under the maps' symmetries
-    (two more searches: a match takes about three times as long); one made without it can
-    start a ``FrameEstimate`` but never commits one."""
+    (two more searches: a match takes about three times as long); an image nothing rules
+    out makes the match ambiguous. ``FrameEstimate`` does not need it: the sightings it
+    commits on rule out images as well."""
     va, vb = _view(a), _view(b)
     cands = _search(va, vb)
     if not cands:
@@ -412,7 +412,7 @@ def match_maps(
         why = _symmetric_images(va, vb, m.pose, contradicts)
         if why:
             return replace(m, accepted=False, reason=why, ambiguous=True)
-    return replace(m, images_checked=images)
+    return m
 
 
 def _symmetries(v: _MapView) -> list[np.ndarray]:
@@ -514,15 +514,15 @@ class FrameEstimate:
     """One robot's frame in the shared one, from successive ``match_maps`` results and
     the robots' sightings of each other at them.
 
-    One accepted match is not trusted: the frame is committed when ``AGREE_MATCHES``
-    matches in a row (made as the maps grew) agree and the robots saw each other in
-    ``MIN_SEEN`` places where the last one puts them. Silence commits nothing: robots
-    that never see each other are not merged (``agents.anchoring`` sends them to meet).
-    A match the maps alone leave ambiguous (they also fit at rivals or symmetric images)
-    counts as accepted when the sightings single it out.
-    Once committed, accepted matches that contradict it are counted; ``REVISE_MATCHES``
-    in a row that agree among themselves replace it (a wrong merge undone). Matches that
-    are not accepted change nothing.
+    One match is not trusted: the frame is committed when ``AGREE_MATCHES`` matches in a
+    row (made as the maps grew) propose it and the robots saw each other in ``MIN_SEEN``
+    places where the last one puts them. A match proposes its pose when it is accepted or
+    refused only as ambiguous (the maps also fit at rivals or symmetric images): the
+    sightings single the truth out of those as they do out of a wrong accepted pose.
+    Silence commits nothing: robots that never see each other are not merged
+    (``agents.anchoring`` sends them to meet). Once committed, proposals that contradict
+    it are counted; ``REVISE_MATCHES`` in a row that agree among themselves, the robots
+    seen at the last, replace it (a wrong merge undone). Other refusals change nothing.
 
     ``candidate`` is the frame the latest accepted or ambiguous match proposes while none
     is committed: where to look for the other robots (``agents.anchoring``)."""
@@ -537,18 +537,15 @@ class FrameEstimate:
     def add(self, m: MapMatch, seen: int = 0) -> np.ndarray | None:
         """The committed frame after ``m``, at whose pose the robots saw each other in
         ``seen`` places."""
-        sighted = seen >= MIN_SEEN
-        if m.accepted or m.ambiguous:
-            self.candidate = m.pose
-        if not (m.accepted or (m.ambiguous and sighted)):
+        if not (m.accepted or m.ambiguous):
             return self.pose
+        sighted = seen >= MIN_SEEN
+        self.candidate = m.pose
         if self.run and not _close(m.pose, self.run[-1], AGREE_M, AGREE_RAD):
             self.run = []
         self.run.append(m.pose)
         if self.pose is None:
-            # sightings at the pose rule out its images as well as the image check does
-            checked = m.images_checked or (m.ambiguous and sighted)
-            if len(self.run) >= AGREE_MATCHES and checked and sighted:
+            if len(self.run) >= AGREE_MATCHES and sighted:
                 self.pose = self.run[-1]
         elif _close(m.pose, self.pose, AGREE_M, AGREE_RAD):
             self.pose = m.pose  # the latest agreeing estimate (the maps grew)
