@@ -34,7 +34,7 @@ from typing import Protocol
 import numpy as np
 
 from polyswarm.control import Follow, PathFollower
-from polyswarm.errors import PlanningError
+from polyswarm.errors import OffMapError, PlanningError
 from protocols.messages import Assignment, AssignmentKind, RobotState
 
 log = logging.getLogger(__name__)
@@ -190,7 +190,8 @@ class Behaviour:
         in the robot frame, ``moving`` flags those the map does not explain, ``turned``
         is the rotation since the last scan (radians)."""
         pose = np.asarray(pose, dtype=float)
-        self._record_trail(pose)
+        if self.mode != Mode.RECOVER:  # going back uses up the trail; it records nothing
+            self._record_trail(pose)
         if self.mode == Mode.START_TURN:
             return self._start_turn(now, pose, turned)
         if self.mode == Mode.LOOK:
@@ -275,18 +276,18 @@ class Behaviour:
 
     # -- detours: recovering and giving way ---------------------------------------------
 
-    def _recover(self, now: float, pose) -> None:
+    def _recover(self, now: float, pose, why: str = "no progress") -> None:
         target = self.assignment.target if self.assignment is not None else -1
         n = self._recoveries[target] = self._recoveries.get(target, 0) + 1
         if n > MAX_RECOVERIES:
             self.follower.set_path(None)
-            self._set(Mode.STUCK, f"no progress after {MAX_RECOVERIES} recoveries")
+            self._set(Mode.STUCK, f"{why} after {MAX_RECOVERIES} recoveries")
             return
         back = self._way_back(pose)
-        log.info("%s: no progress, recovering (%d): back %.1f m", self.id, n, len(back) * 0.1)
+        log.info("%s: %s, recovering (%d): back %.1f m", self.id, why, n, len(back) * 0.1)
         self.follower.set_path(back if len(back) else None)
         self._until = now + RECOVER_S
-        self._set(Mode.RECOVER, f"no progress: back along the trail ({n})")
+        self._set(Mode.RECOVER, f"{why}: back along the trail ({n})")
 
     def _give_way(self, rid: str, other: np.ndarray, now: float, pose) -> None:
         goal = self.planning.yield_point(np.asarray(pose[:2]), other)
@@ -319,10 +320,11 @@ class Behaviour:
             self._trail.append((float(pose[0]), float(pose[1])))
 
     def _way_back(self, pose) -> np.ndarray:
-        """The trail back to ``RECOVER_BACK_M`` behind the robot, as a path."""
+        """The trail back to ``RECOVER_BACK_M`` behind the robot, as a path; the points
+        taken leave the trail (a second recovery goes on further back)."""
         pts, run = [np.asarray(pose[:2])], 0.0
-        for p in reversed(self._trail):
-            q = np.asarray(p)
+        while self._trail:
+            q = np.asarray(self._trail.pop())
             run += float(np.hypot(*(q - pts[-1])))
             pts.append(q)
             if run >= RECOVER_BACK_M:
@@ -360,6 +362,12 @@ class Behaviour:
                 self._fail_since = now
             if now - self._fail_since < UNREACHABLE_AFTER_S:
                 self._set(Mode.NAVIGATE, f"no path yet ({e}); retrying")
+            elif isinstance(e, OffMapError):
+                # standing where the map knows nothing, it plans no path to any goal (the
+                # coordinator none from it either: office seed 1 stood 900 s): back to
+                # where it came from, or turn and look
+                self._fail_since = None
+                self._recover(now, pose, "off the map")
             else:
                 self._set(Mode.UNREACHABLE, str(e))
             return

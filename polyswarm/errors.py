@@ -41,6 +41,11 @@ class PlanningError(PolyswarmError):
     """No path can be planned (start or goal outside explored free space, or unreachable)."""
 
 
+class OffMapError(PlanningError):
+    """The start is not in explored free space: the robot stands where its map says
+    nothing is known (it must move back to known space or look around)."""
+
+
 class SimulationError(PolyswarmError):
     """The simulator cannot be set up or stepped as asked."""
 

@@ -37,7 +37,7 @@ import numpy as np
 import shapely
 import shapely.ops
 
-from polyswarm.errors import PlanningError
+from polyswarm.errors import OffMapError, PlanningError
 from polyswarm.navgraph import (
     BOUNDARY,
     BUFFER_SEGMENTS,
@@ -97,7 +97,7 @@ class Planner:
         s_node = node_of(self.map, *start)
         sources = self._entries(s_node, start)
         if s_node is None and not sources:
-            raise PlanningError(f"start {_xy(start)} is not in explored free space")
+            raise OffMapError(f"start {_xy(start)} is not in explored free space")
         g_node = node_of(self.map, *goal)
         if g_node is None:
             raise PlanningError(f"goal {_xy(goal)} is in unexplored space (or in an obstacle)")

@@ -11,6 +11,7 @@ import numpy as np
 
 from agents.behaviour import MAX_RECOVERIES, RECOVER_BACK_M, Behaviour, Mode
 from polyswarm.control import ControlParams, PathFollower
+from polyswarm.errors import OffMapError
 from protocols.messages import Assignment, AssignmentKind, RobotState
 
 
@@ -107,6 +108,35 @@ def test_a_robot_that_cannot_get_on_backs_off_along_its_trail_then_hands_its_tar
     b.on_assignment(goal, 220.0, pose)
     _, seen = drive(b, pose, 20.0, wall_x=2.5, t0=220.0)
     assert Mode.RECOVER in [m for _, _, m in seen]
+
+
+class KnownUpToX1(StraightLine):
+    """The map knows the space up to x = 1 m only: planning from beyond it fails."""
+
+    def plan(self, start, goal, partial):
+        if start[0] > 1.0:
+            raise OffMapError(
+                f"start ({start[0]:.2f}, {start[1]:.2f}) is not in explored free space"
+            )
+        return super().plan(start, goal, partial)
+
+
+def test_a_robot_off_its_map_backs_into_known_space_instead_of_waiting():
+    """Off the map, no path leads anywhere, for the robot or the coordinator: it goes
+    back the way it came (into known space) rather than reporting the goal unreachable
+    and standing there."""
+    follower = PathFollower(ControlParams(radius_m=0.2, max_v_mps=0.5, period_s=0.1))
+    b = Behaviour("r2", follower, KnownUpToX1(), 1.5, 2 * math.pi)
+    b.on_assignment(Assignment(AssignmentKind.EXPLORE, 4, (5.0, 0.0), ()), 0.0, np.zeros(3))
+    b._last_plan = math.inf  # no periodic replanning: the path holds until it fails
+    pose, seen = drive(b, np.zeros(3), 4.0)  # on the path, past x = 1 m
+    assert pose[0] > 1.2
+    b._last_plan = -math.inf
+    pose, seen = drive(b, pose, 30.0, t0=4.0)
+    modes = [m for _, _, m in seen]
+    assert Mode.RECOVER in modes and Mode.UNREACHABLE not in modes
+    back = [p[0] for _, p, m in seen if m == Mode.RECOVER]
+    assert min(back) < 1.0  # back in known space
 
 
 def test_the_trail_moves_with_the_frame_when_the_robot_is_anchored():
