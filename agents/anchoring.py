@@ -15,10 +15,11 @@ Until the coordinator knows where that frame lies in the shared map frame:
   and saw nothing); in a symmetric building that is what tells the truth from its
   rotated images;
 * while a match proposes a frame, the robot is drawn towards where that frame puts the
-  nearest robot of the swarm, and that robot towards where the frame puts it
-  (``Coordinator.rendezvous`` of both coordinators): seen there, in a few places, the
-  robots confirm the frame; a wrong frame puts the other robot where the robot finds
-  nobody, and the sightings contradict it;
+  nearest robot of the swarm (``Coordinator.rendezvous`` of its solo coordinator): seen
+  there, in a few places, the robots confirm the frame; a wrong frame puts the other
+  robot where the robot finds nobody, and the sightings contradict it. The other robot
+  is not drawn: sent towards the waiting one as well, it sought goals behind doors it
+  could not plan through (office, rooms: 2-5 times the failed plans, no rooms merge);
 * once successive matches agree and the robots saw each other where they put them
   (``FrameEstimate``), the robot is sent an ``anchor``:
   the pose of its frame in the shared frame. It moves its pose graph, keyframes and pose
@@ -112,7 +113,6 @@ class Anchoring:
     def tick(self, main, now_s: float) -> list[tuple[str, Anchor]]:
         """Start the matches that are due, take the finished ones; the anchors to send."""
         out = []
-        main.rendezvous = {}  # drawn afresh for the robots still waiting
         for rid, w in self.waiting.items():
             if w.matching is not None and w.matching.done():
                 self._took(rid, w, w.matching)
@@ -147,10 +147,9 @@ class Anchoring:
 
     def _rendezvous(self, rid: str, w: _Waiting, main) -> None:
         """Send a waiting robot towards where its candidate frame puts the nearest
-        robot of the swarm (in its own frame), and that robot towards where the frame puts
-        the waiting one (in the shared frame): if the frame is right they see each other
-        and the frame is committed; if not, they find the place empty (or a wall), the
-        sightings contradict the frame and the next match leaves it out."""
+        robot of the swarm (in its own frame): if the frame is right they see each other
+        there and the frame is committed; if not, the robot finds the place empty (or a
+        wall), the sightings contradict the frame and the next match leaves it out."""
         solo = w.solo
         me = solo.robots[rid].pose
         frame = w.frames.candidate
@@ -161,8 +160,6 @@ class Anchoring:
         there = transform_points(inverse(frame), np.array([r.pose[:2] for r in others]))
         k = int(np.argmin(np.hypot(*(there - me[:2]).T)))
         solo.rendezvous[rid] = (float(there[k][0]), float(there[k][1]))
-        x, y = transform_points(frame, me[None, :2])[0]
-        main.rendezvous[others[k].id] = (float(x), float(y))
 
     def _took(self, rid: str, w: _Waiting, done: Future) -> None:
         try:

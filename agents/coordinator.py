@@ -197,7 +197,7 @@ class Coordinator:
         self.frames_pending: tuple[str, ...] = ()  # robots exploring in frames of their own
         # robots drawn to a rendezvous (``agents.anchoring``): robot -> point (x m, y m, in
         # this coordinator's frame). A robot exploring alone is drawn to where its candidate
-        # frame puts the nearest robot of the swarm; that robot, to where the frame puts it
+        # frame puts the nearest robot of the swarm
         self.rendezvous: dict[str, tuple[float, float]] = {}
 
     # -- inputs -------------------------------------------------------------------------------
