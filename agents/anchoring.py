@@ -19,7 +19,7 @@ Until the coordinator knows where that frame lies in the shared map frame:
   there, in a few places, the robots confirm the frame; a wrong frame puts the other
   robot where the robot finds nobody, and the sightings contradict it. The other robot
   is not drawn: sent towards the waiting one as well, it sought goals behind doors it
-  could not plan through (office, rooms: 2-5 times the failed plans, no rooms merge);
+  could not plan through (office launches: 8-22 failed plans a run, 1-4 without);
 * once successive matches agree and the robots saw each other where they put them
   (``FrameEstimate``), the robot is sent an ``anchor``:
   the pose of its frame in the shared frame. It moves its pose graph, keyframes and pose
