@@ -260,4 +260,4 @@ def _match(merged, own, contradicts, seen_at) -> tuple[MapMatch, int]:
     searches, three times the time, to tell what the sightings tell), and the robots'
     sightings of each other at the pose it found (0 without sightings)."""
     m = match_maps(merged, own, contradicts, images=False)
-    return m, (seen_at(m.pose) if seen_at is not None and (m.accepted or m.ambiguous) else 0)
+    return m, (seen_at(m.pose) if seen_at is not None and m.proposed else 0)

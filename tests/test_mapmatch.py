@@ -169,6 +169,34 @@ def test_sightings_single_out_a_pose_the_maps_leave_ambiguous():
     assert g.run == [] and g.candidate is None
 
 
+def _ev(conflict_share: float, overlap_m2: float = 50.0) -> dict:
+    return {
+        "overlap_m2": overlap_m2,
+        "agreeing_wall_m": 30.0,
+        "agreeing_share": 0.9,
+        "conflict_share": conflict_share,
+        "score": 300.0,
+    }
+
+
+@pytest.mark.parametrize(
+    ("conflicts", "overlap_m2", "proposed"),
+    [(0.005, 50.0, True), (0.02, 50.0, True), (0.05, 50.0, False), (0.02, 5.0, False)],
+)
+def test_a_pose_refused_only_for_slight_conflicts_is_proposed(conflicts, overlap_m2, proposed):
+    """A map bent by drift conflicts with the other by a per cent or two at the right
+    frame: refused, but proposed for sightings to confirm. More conflicts, or another
+    reason to refuse, and it is not."""
+    from polyswarm.mapmatch import _decide
+
+    m = _decide([(np.zeros(3), _ev(conflicts, overlap_m2))], candidates=1)
+    assert m.accepted == (conflicts <= 0.01 and overlap_m2 >= 10.0)
+    assert m.proposed == proposed
+    f = FrameEstimate()
+    f.add(m, SEEN)
+    assert (f.add(m, SEEN) is not None) == proposed
+
+
 def test_a_committed_frame_is_revised_by_agreeing_contradictions_only():
     f = FrameEstimate()
     f.add(_m((1.0, 0.0, 0.0)), SEEN)

@@ -150,6 +150,7 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
             row["ours"]["margin_wall_m"] = m.margin_wall_m
             row["ours"]["contradicted"] = m.contradicted
             row["ours"]["ambiguous"] = m.ambiguous
+            row["ours"]["slight_conflict"] = m.slight_conflict
             # the robots seen where the pose puts them (what commits a frame; robots that
             # explore apart, as these recorded ones did, seldom see each other)
             row["ours"]["seen"] = distinct_places(mutual_seen(seen_a, seen_b, m.pose, (a, b)))
