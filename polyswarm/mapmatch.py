@@ -516,8 +516,8 @@ def frame_error(est, truth) -> tuple[float, float]:
 
 
 AGREE_M, AGREE_RAD = 0.3, math.radians(3.0)  # two matches within this are the same frame
-AGREE_MATCHES = 2  # accepted matches in a row that must agree before a frame is committed
-REVISE_MATCHES = 3  # accepted matches in a row that agree on another frame: revise it
+AGREE_MATCHES = 2  # matches in a row that must propose a frame before it is committed
+REVISE_MATCHES = 3  # matches in a row that propose another frame (robots seen): revise it
 # the robots must have seen each other in this many places where the frame puts them
 # (``polyswarm.sighting.distinct_places``) before it is committed: in a building that looks
 # the same after a quarter turn the maps fit a wrong image as well as the truth, or better
@@ -549,7 +549,7 @@ class FrameEstimate:
 
     def __init__(self) -> None:
         self.pose: np.ndarray | None = None  # the committed frame
-        self.run: list[np.ndarray] = []  # the latest accepted matches that agree
+        self.run: list[np.ndarray] = []  # the latest proposals that agree
         self.candidate: np.ndarray | None = None
         self.contradictions = 0
         self.revisions = 0
