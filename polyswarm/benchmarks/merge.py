@@ -10,8 +10,8 @@ frame (its start is its origin), and robot k's map is matched against robot 1's 
   profile with a pose a second, as robots do while a frame is unknown), and the
   ``FrameEstimate`` that commits a frame once successive matches agree and the robots
   saw each other where it puts them. These recorded robots explore without the
-  coordinator's rendezvous (a launch sends a waiting robot and the nearest other to meet
-  each other): their sightings are the ones exploration gives;
+  coordinator's rendezvous (a launch sends a waiting robot towards where its candidate
+  frame puts the nearest other): their sightings are the ones exploration gives;
 * the peer method, ``multirobot_map_merge``'s feature-based grid merging
   (``gridmerge``: AKAZE, its hard-coded choice, and ORB) on the same maps rasterised at
   5 cm, at several confidence thresholds (its default is 1.0), so that its best
