@@ -18,11 +18,11 @@ the places of that disc where a robot can stand count: along a corridor the disc
 always reaches a wall, whose returns would otherwise hide every prediction.
 
 ``seen`` counts the opposite, positive evidence: a return where the frame puts the other
-robot, clear of the viewer's walls. A frame is committed at once when the robots have
-seen each other in a few places where it puts them (``distinct_places``;
-``polyswarm.mapmatch.FrameEstimate``), otherwise only after it stood a while
-uncontradicted; robots exploring apart seldom see each other, so the coordinator sends a
-waiting robot towards where its candidate frame puts the others (``agents.anchoring``).
+robot, clear of the viewer's walls. A frame is committed only when the robots have seen
+each other in a few places where it puts them (``distinct_places``;
+``polyswarm.mapmatch.FrameEstimate``); robots exploring apart seldom see each other, so
+the coordinator sends a waiting robot towards where its candidate frame puts the others
+(``agents.anchoring``).
 
 Assumed: robots are visible to each other's lidars (true of the simulator's robots and
 of TurtleBot-class robots, whose lidar heads sit at the same height), and the robots'
