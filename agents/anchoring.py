@@ -250,8 +250,7 @@ class Anchoring:
         info = main.robots[rid] = RobotInfo(rid, pose.copy())  # its start: its frame's origin
         info.alive = solo.alive
         if solo.map is not None:  # in the shared frame now: the anchor's correction moved it
-            main.on_robot_map(rid, solo.map)
-            info.atlas = solo.atlas
+            main.on_robot_map(rid, solo.map, solo.atlas)
         log.info("robot %s joins the swarm's map (%d matches)", rid, w.matches)
         return True
 

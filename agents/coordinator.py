@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agents import persist
+from agents.replay import Replayed, ReplayPool
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.explore import GraphIndex, Reach, Strategy, assign, target_groups
@@ -106,6 +107,13 @@ LOOK_OPEN_SHARE = 0.5
 # ended at 77 % and 90 % after one frontier each failed twice; each round must be paid
 # for by new explored space, so rounds cannot repeat for ever
 RETRY_GROWTH_M2 = 2.0
+# at the end of a run, the replay pool's last updates are waited for this long (s): a
+# 25-robot maze cycle's replays take about 1 s of processor time
+DRAIN_TIMEOUT_S = 10.0
+# a merge of robots' cells waits this long at most for the replays on their way (s).
+# Merging without them cost 10 % of the coverage at 150 s on the maze (4 of 4 runs):
+# a robot's latest view missed the merge by a replay's time, then waited a whole period
+FLUSH_WAIT_S = 0.5
 
 
 @dataclass
@@ -133,6 +141,12 @@ class RobotInfo:
     # its poses sent before are that far off its map now (sightings forget them)
     corrected_s: float = -math.inf
     home_failed: bool = False  # could not drive back to its start (the mission still ends)
+    # with a replay pool (``agents.replay``): the count of whole maps given to its worker
+    # (results of updates sent before the last are dropped), its updates on the way, and
+    # the newest version among them
+    epoch: int = 0
+    inflight: int = 0
+    queued: int = 0
 
 
 @dataclass
@@ -143,8 +157,20 @@ class Outgoing:
 
 
 class Coordinator:
-    def __init__(self, cfg: Config, robots: dict[str, tuple[float, float, float]]) -> None:
+    """The swarm's map and plan. With a ``ReplayPool`` (``agents.replay``), robots'
+    merges and corrections are replayed on its worker processes, and ``collect()``
+    brings in what they changed; without one, on the calling thread."""
+
+    def __init__(
+        self,
+        cfg: Config,
+        robots: dict[str, tuple[float, float, float]],
+        pool: ReplayPool | None = None,
+    ) -> None:
         self.cfg = cfg
+        self.pool = pool
+        self.worker_replay_cpu_ms: list[float] = []  # the pool's processor time per update
+        self.replay_lag_ms: list[float] = []  # wall time from sending an update to taking it in
         self.strategy = Strategy(cfg.explore.strategy)
         self.robots = {rid: RobotInfo(rid, np.array(p, dtype=float)) for rid, p in robots.items()}
         self.merged = GridPolyMap(cfg.map.cell_size_m)
@@ -175,6 +201,7 @@ class Coordinator:
         self._wake = True
         # merge time since the last cycle (counts into the cycle): wall and processor ms
         self._pending_ms = self._pending_cpu_ms = 0.0
+        self._timing = False  # inside a ``timed`` block
         self._pending: dict[str, set] = {}  # robot -> its cells changed since the last merge
         self._rebuild: set = set()  # cells a robot's correction changed: merged afresh
         self.corrections = 0  # robot corrections replayed on their map copies
@@ -219,7 +246,7 @@ class Coordinator:
             self.graph = NavGraph.for_robot(merged, self.cfg.nav)
             self._index = None
         for rid, pmap in robot_maps.items():
-            self.robot(rid).map = pmap
+            self._set_map(self.robot(rid), pmap)
             # cells applied but not merged when the old process died are merged now
             # (cells the merged map already holds are dropped cheaply before the overlay)
             self._pending.setdefault(rid, set()).update(pmap.cells)
@@ -243,6 +270,8 @@ class Coordinator:
 
     def _check_behind(self, info: RobotInfo) -> None:
         have = 0 if info.map is None else info.map.version
+        if info.inflight:  # on its way through the replay pool
+            have = max(have, info.queued)
         if info.announced > have:  # a delta is late or lost
             info.behind_since = info.behind_since if info.behind_since is not None else self.now
         else:
@@ -300,6 +329,8 @@ class Coordinator:
         Raises DeltaGapError when the robot's delta does not apply (fetch its map)."""
         self.now = max(self.now, stamp_s)
         info = self.robot(rid)
+        if self.pool is not None:  # in order behind the robot's merges
+            return self._to_pool(info, "delta", delta, stamp_s)
         if info.map is None:
             if delta.base_version > 0:
                 raise _gap(rid, delta)
@@ -317,6 +348,8 @@ class Coordinator:
         Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
         self.now = max(self.now, stamp_s)
         info = self.robot(rid)
+        if self.pool is not None:
+            return self._to_pool(info, "merge", op, stamp_s)
         if info.map is None:
             if op.base_version > 0:
                 raise DeltaGapError(f"first merge of {rid} starts at version {op.base_version}")
@@ -344,18 +377,113 @@ class Coordinator:
         Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
         self.now = max(self.now, stamp_s)
         info = self.robot(rid)
+        if self.pool is not None:
+            return self._to_pool(info, "correct", op, stamp_s)
         if info.map is None:
             raise DeltaGapError(f"correction of {rid} before any of its map")
         with self.timed("replay"):
             info.map, info.atlas, changed = replay_correction(info.map, info.atlas, op)
+        self._corrected(info, stamp_s, largest_move_m(op), {c.index for c in changed})
+        return MapDelta(op.cell_size, op.base_version, op.version, tuple(changed))
+
+    def _corrected(self, info: RobotInfo, stamp_s: float, moved_m: float, idxs: set) -> None:
         self.corrections += 1
-        if largest_move_m(op) > SIGHTING_SLACK_M:
+        if moved_m > SIGHTING_SLACK_M:
             info.corrected_s = stamp_s
         self._check_behind(info)
-        idxs = {c.index for c in changed}
-        self._pending.setdefault(rid, set()).update(idxs)
+        self._pending.setdefault(info.id, set()).update(idxs)
         self._rebuild |= idxs
-        return MapDelta(op.cell_size, op.base_version, op.version, tuple(changed))
+
+    def _to_pool(self, info: RobotInfo, kind: str, op, stamp_s: float) -> None:
+        """Send an update to the robot's replay worker; ``collect`` brings in its cells."""
+        with self.timed("replay"):
+            self.pool.update(info.id, info.epoch, kind, op, stamp_s)
+        info.inflight += 1
+        info.queued = max(info.queued, op.version)
+
+    def _set_map(self, info: RobotInfo, pmap: GridPolyMap | None, atlas: Atlas | None = None):
+        """The robot's map copy replaced whole (and its atlas, if given; else kept)."""
+        info.map = pmap
+        if self.pool is None:
+            if atlas is not None:
+                info.atlas = atlas
+            return
+        info.epoch += 1  # updates on their way were for the map replaced
+        info.inflight = 0
+        with self.timed("replay"):
+            self.pool.set_map(info.id, info.epoch, pmap, atlas)
+
+    def use_pool(self, pool: ReplayPool) -> ReplayPool:
+        """Replay robots' updates on ``pool`` from now on (the maps held go to it)."""
+        self.pool = pool
+        for info in self.robots.values():
+            if info.map is not None:
+                self._set_map(info, info.map, info.atlas)
+        return pool
+
+    def drain(self, timeout_s: float = DRAIN_TIMEOUT_S) -> list[tuple[str, MapDelta | MapError]]:
+        """``collect`` until the pool has replayed every update sent to it (or
+        ``timeout_s`` passed)."""
+        out: list[tuple[str, MapDelta | MapError]] = []
+        if self.pool is None:
+            return out
+        deadline = time.monotonic() + timeout_s
+        with self.timed("collect"):  # waiting delays the cycle as much as working
+            out += self.collect()
+            while any(r.inflight for r in self.robots.values()):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    log.warning("replay processes still busy after %.1f s", timeout_s)
+                    break
+                out += self.collect(wait_s=min(left, 0.1))
+        return out
+
+    def collect(self, wait_s: float = 0.0) -> list[tuple[str, MapDelta | MapError]]:
+        """What the replay pool finished since the last call, applied to the robots' map
+        copies (their cells are merged at the next ``flush``): per update, the cells it
+        changed (for the journal) or the MapError that asks for the robot's map. Robots
+        whose worker died are given their maps again (their atlases are lost with it, as
+        on a restart of the coordinator: their next correction fetches the map).
+        ``wait_s``: how long to wait for a first result when none is there."""
+        if self.pool is None:
+            return []
+        out: list[tuple[str, MapDelta | MapError]] = []
+        with self.timed("collect"):
+            done, lost = self.pool.poll(wait_s)
+            for r in done:
+                got = self._collected(r)
+                if got is not None:
+                    out.append((r.rid, got))
+            for rid in lost:
+                self._set_map(self.robot(rid), self.robot(rid).map)
+        return out
+
+    def _collected(self, r: Replayed) -> MapDelta | MapError | None:
+        info = self.robot(r.rid)
+        if r.epoch != info.epoch:  # sent before its map was replaced
+            return None
+        info.inflight = max(0, info.inflight - 1)
+        self.worker_replay_cpu_ms.append(r.cpu_ms)
+        self.replay_lag_ms.append((time.perf_counter() - r.sent_s) * 1e3)
+        self.now = max(self.now, r.stamp_s)
+        if r.error is not None:
+            info.epoch += 1  # what is still on its way fails the same: drop it
+            info.inflight = 0
+            self._check_behind(info)
+            return DeltaGapError(f"{r.kind} of {r.rid}: {r.error}")
+        if r.delta is None:
+            return None
+        base = info.map if info.map is not None else GridPolyMap(r.delta.cell_size)
+        info.map = base.apply_delta(r.delta)
+        idxs = {c.index for c in r.delta.cells}
+        if r.kind == "correct":
+            self._corrected(info, r.stamp_s, r.moved_m, idxs)
+        else:
+            self.replayed_merges += r.kind == "merge"
+            self.applied_deltas += r.kind == "delta"
+            self._check_behind(info)
+            self._pending.setdefault(r.rid, set()).update(idxs)
+        return r.delta
 
     def on_robot_update(self, rid: str, stamp_s: float, kind: MapKind, wire: bytes):
         """A robot's map update as its MapChunk carried it: decoded and applied; for a
@@ -374,22 +502,24 @@ class Coordinator:
         if kind == MapKind.CORRECT:
             return self.on_robot_correction(rid, stamp_s, op)
         self.on_robot_delta(rid, stamp_s, op)
-        return op
+        return op if self.pool is None else None
 
-    def on_robot_map(self, rid: str, pmap: GridPolyMap) -> None:
-        """A robot's full map (resync): nothing it mapped is lost."""
+    def on_robot_map(self, rid: str, pmap: GridPolyMap, atlas: Atlas | None = None) -> None:
+        """A robot's full map (resync, or handed over with its ``atlas`` from exploring
+        alone): nothing it mapped is lost."""
         info = self.robot(rid)
         if info.map is not None and info.map.version >= pmap.version:
             return
         if info.map is not None:  # corrections missed: cells that lost space are merged afresh
             old = info.map.cells
             self._rebuild |= {i for i, c in old.items() if not c.same_content(pmap.cells.get(i))}
-        info.map = pmap
+        self._set_map(info, pmap, atlas)
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(pmap.cells)
 
     def flush_due(self) -> bool:
-        return bool(self._pending) and self.now - self._last_flush >= MERGE_PERIOD_S
+        changed = self._pending or any(r.inflight for r in self.robots.values())
+        return bool(changed) and self.now - self._last_flush >= MERGE_PERIOD_S
 
     def flush(self) -> MapDelta | None:
         """Merge the robots' cells changed since the last flush; the merged map's delta.
@@ -447,11 +577,17 @@ class Coordinator:
 
     @contextmanager
     def timed(self, stage: str):
-        """``with coord.timed("fetch"): ...`` counts the block as work of ``stage``."""
+        """``with coord.timed("fetch"): ...`` counts the block as work of ``stage``
+        (a block inside another is counted as the outer's)."""
+        if self._timing:
+            yield
+            return
+        self._timing = True
         t0, c0 = time.perf_counter(), time.thread_time()
         try:
             yield
         finally:
+            self._timing = False
             self.spent(stage, (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
 
     def stage_shares(self) -> dict[str, float]:
@@ -848,7 +984,10 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
             )
     with open_session(session_spec) as session:
         bus = Bus(session, "coordinator")
+        pool = None
         try:
+            if cfg.explore.replay_workers:
+                pool = coord.use_pool(ReplayPool(cfg.explore.replay_workers))
             bus.subscribe(keys.all_robots("map/delta"), MapChunk)
             bus.subscribe(keys.all_robots("pose"), Pose)
             bus.subscribe(keys.all_robots("status"), RobotStatus)
@@ -890,25 +1029,22 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                             try:
                                 wire = item.payload
                                 changed = coord.on_robot_update(rid, item.stamp_s, msg.kind, wire)
-                                if msg.kind in (MapKind.MERGE, MapKind.CORRECT):
-                                    # journaled as the cells it changed (restores need no merge)
-                                    wire = None
-                                    if changed is not None and journal is not None:
-                                        with coord.timed("journal"):
-                                            wire = encode_delta(changed)
                             except MapError as e:
-                                log.info("resync of %s: %s", rid, e)
-                                coord.gaps += 1
-                                resync.add(rid)
-                            else:
-                                if wire is not None:
-                                    copy = coord.robot(rid).map
-                                    with coord.timed("journal"):
-                                        _journal(journal, "robot_delta", rid, wire, copy)
+                                _resync(coord, rid, e, resync)
+                            else:  # journaled as the cells it changed (restores need no merge)
+                                raw = wire if msg.kind == MapKind.DELTA else None
+                                _journal_cells(journal, coord, rid, changed, raw)
                     except DecodeError as e:
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
                         log.warning("%s: %s", item.key, e)
+                # replayed on the pool's processes; a merge waits for what is on its way
+                took = coord.drain(FLUSH_WAIT_S) if coord.flush_due() else coord.collect()
+                for rid, got in took:
+                    if isinstance(got, MapError):
+                        _resync(coord, rid, got, resync)
+                    else:
+                        _journal_cells(journal, coord, rid, got)
                 behind = set(coord.needs_resync()) - resync
                 coord.gaps += len(behind)  # a last delta lost: announced, never received
                 resync |= behind
@@ -965,6 +1101,11 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
         finally:
             anchoring.close()
             bus.close()
+            if pool is not None:  # what robots sent is replayed, journaled and merged below
+                for rid, got in coord.drain():
+                    if not isinstance(got, MapError):
+                        _journal_cells(journal, coord, rid, got)
+                pool.close()
             log.info(
                 "robot map updates: %d merges replayed, %d cell deltas applied, %d map fetches",
                 coord.replayed_merges,
@@ -976,10 +1117,11 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                     "coordinator thread's work by stage: %s",
                     ", ".join(f"{k} {v:.0%}" for k, v in coord.stage_shares().items()),
                 )
-            if coord.replay_cpu_ms:
-                r = np.asarray(coord.replay_cpu_ms)
+            if coord.replay_cpu_ms or coord.worker_replay_cpu_ms:
+                r = np.asarray(coord.replay_cpu_ms or coord.worker_replay_cpu_ms)
                 log.info(
-                    "merge replays: processor time p50 %.1f ms, p95 %.1f ms, %.1f s in all",
+                    "replays%s: processor time p50 %.1f ms, p95 %.1f ms, %.1f s in all",
+                    f" on {pool.workers} processes" if pool is not None else "",
                     np.median(r),
                     np.percentile(r, 95),
                     r.sum() / 1e3,
@@ -1003,9 +1145,28 @@ def _robot_message(c: Coordinator, rid: str, item, resync: set) -> None:
         try:
             c.on_robot_update(rid, item.stamp_s, msg.kind, item.payload)
         except MapError as e:
-            log.info("resync of %s: %s", rid, e)
-            c.gaps += 1
-            resync.add(rid)
+            _resync(c, rid, e, resync)
+
+
+def _resync(c: Coordinator, rid: str, e: MapError, resync: set) -> None:
+    log.info("resync of %s: %s", rid, e)
+    c.gaps += 1
+    resync.add(rid)
+
+
+def _journal_cells(
+    journal: persist.CoordinatorJournal | None,
+    coord: Coordinator,
+    rid: str,
+    changed: MapDelta | None,
+    wire: bytes | None = None,
+) -> None:
+    """A robot map update that applied, journaled as the cells it changed (``wire``:
+    already encoded, as a cell delta arrives)."""
+    if journal is None or changed is None:
+        return
+    with coord.timed("journal"):
+        _journal(journal, "robot_delta", rid, wire or encode_delta(changed), coord.robot(rid).map)
 
 
 def _journal(journal: persist.CoordinatorJournal | None, what: str, *args) -> None:

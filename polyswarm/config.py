@@ -361,6 +361,10 @@ class ExploreConfig:
     cycle_period_s: float = positive(1.0, 3600.0)  # assignment cycle (also on events)
     end_confirm_s: float = num(3.0, 0.0, 3600.0)  # no reachable frontier this long: done
     return_home: bool = True  # robots drive back to their start when the mission ends
+    # processes that replay the robots' merges and corrections for the coordinator, off
+    # its thread (agents.replay); 0 replays them on it. One is enough for a few robots on
+    # a small computer; a fleet of tens wants about one per spare core
+    replay_workers: int = num(1, 0, 64)
 
 
 @dataclass(frozen=True)

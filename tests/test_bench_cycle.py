@@ -13,3 +13,13 @@ def test_a_short_exploration_counts_replays_merges_and_planning():
     assert abs(sum(shares.values()) - 1.0) < 1e-9
     assert res["cycle_p95_ms_worst"] == r["cycle_p95_ms"]
     assert res["target_p95_ms"] is None  # no target is set for 2 robots
+    # replayed on a worker process: its processor time and the lag it adds are reported
+    assert res["replay_workers"] == 1 and r["replay_workers_cpu_s"] > 0.0
+    assert 0.0 < r["replay_lag_p50_ms"] <= r["replay_lag_p95_ms"]
+    assert "collect" in shares
+
+
+def test_replays_on_the_coordinators_thread_report_no_pool():
+    r = cycle.run(("rooms",), robots=2, sim_s=8.0, replay_workers=0)["worlds"]["rooms"]
+    assert r["replayed_merges"] > 3 and r["replay_workers_cpu_s"] == 0.0
+    assert r["replay_lag_p95_ms"] is None and "collect" not in r["stage_share"]

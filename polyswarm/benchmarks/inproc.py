@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
 from polyswarm.config import Config, RobotEntry
+from polyswarm.errors import MapError
 from polyswarm.evaluation import coverage_tolerance, reachable_free
 from polyswarm.follow import CorrectionOp
 from polyswarm.polymap import MapDelta, MergeOp
@@ -46,14 +48,18 @@ def explore_in_process(
     start_poses: list | None = None,
     on_pose: Callable[[int, float, object], None] | None = None,
     sightings: bool | None = None,
+    replay_workers: int = 0,
 ) -> InProcessRun:
     """``on_step(sim, agents, coordinator)`` is called after every simulation step with
     scans (for instrumentation); ``on_pose(robot index, time s, Pose)`` with every pose
     an agent sends. ``start_poses`` (x m, y m, theta rad) per robot: the robots' true
-    starts, also given to the coordinator (default: side by side at the world's start)."""
+    starts, also given to the coordinator (default: side by side at the world's start).
+    ``replay_workers`` processes replay the robots' merges for the coordinator
+    (``agents.replay``); with none it replays them itself, and a run is the same each time."""
     import shapely
 
-    from agents.coordinator import Coordinator
+    from agents.coordinator import FLUSH_WAIT_S, Coordinator
+    from agents.replay import ReplayPool
     from agents.robot import RobotAgent
     from protocols.mapcodec import encode_updates
     from protocols.messages import MAP_KIND_OF, MissionState, Odometry
@@ -71,6 +77,7 @@ def explore_in_process(
     for a in agents:
         a.sightings = sightings
     coord = Coordinator(cfg, {a.id: a.start_pose for a in agents})
+    pool = coord.use_pool(ReplayPool(replay_workers)) if replay_workers else None
     for a in agents:
         coord.on_alive(a.id, True)
     delta_bytes = 0
@@ -80,7 +87,7 @@ def explore_in_process(
     tol = coverage_tolerance(lid.noise_sigma_m, lid.noise_sigma_per_m, res)
     free = reachable_free(world.free, cfg.sim.robot.radius_m, starts, tol)
     next_sample = 0.0
-    with Simulation(world, cfg.sim, robots, start_poses=starts) as sim:
+    with Simulation(world, cfg.sim, robots, start_poses=starts) as sim, _closing(pool):
         while sim.time < sim_s:
             events = sim.step()
             for ev in events:
@@ -115,6 +122,11 @@ def explore_in_process(
                 continue
             if on_step is not None:
                 on_step(sim, agents, coord)
+            # replayed on the pool's processes; a merge waits for what is on its way
+            took = coord.drain(FLUSH_WAIT_S) if coord.flush_due() else coord.collect()
+            for rid, got in took:
+                if isinstance(got, MapError):  # the robot's map, as a resync fetches it
+                    coord.on_robot_map(rid, agents[int(rid[1:]) - 1].slam.map)
             merged = coord.flush() if coord.flush_due() else None
             if coord.due():
                 o = coord.cycle()
@@ -134,4 +146,14 @@ def explore_in_process(
                 coverage.append((sim.time, cov))
                 if cov >= stop_coverage or coord.state == MissionState.DONE:
                     break
+        coord.drain()  # every replay counted
     return InProcessRun(coord, agents, sim.time, delta_bytes, coverage)
+
+
+@contextmanager
+def _closing(pool):
+    try:
+        yield pool
+    finally:
+        if pool is not None:
+            pool.close()

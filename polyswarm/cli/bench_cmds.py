@@ -881,6 +881,9 @@ def bench_cycle(
         600.0, min=1.0, help="Simulated seconds at most (a run ends with its mission)."
     ),
     seed: int = typer.Option(0, help="Seed of the worlds and the simulation."),
+    replay_workers: int = typer.Option(
+        1, min=0, help="Processes replaying robots' merges (0: on the coordinator's thread)."
+    ),
 ) -> None:
     """The coordinator's cycle per world, all its work included (replays, merge, plan)."""
     from rich.console import Console
@@ -895,6 +898,7 @@ def bench_cycle(
             sim_time,
             seed,
             lambda what: status.update(f"cycle: {what}"),
+            replay_workers,
         )
     _save(save, res)
     if as_json:
@@ -902,9 +906,10 @@ def bench_cycle(
         return
     target = res["target_p95_ms"]
     goal = "" if target is None else f" (target p95: {target:.0f} ms)"
-    t = Table(title=f"Coordinator cycle, {robots} robots{goal}")
+    where = f"{replay_workers} replay processes" if replay_workers else "replays on its thread"
+    t = Table(title=f"Coordinator cycle, {robots} robots, {where}{goal}")
     cols = ("world", "simulated s", "cycles", "p50 ms", "p95 ms", "max ms", "processor p95 ms")
-    for col in (*cols, "replay share"):
+    for col in (*cols, "replay share", "replay processes' s", "replay lag p95 ms"):
         t.add_column(col, justify="left" if col == "world" else "right")
     for w, r in res["worlds"].items():
         t.add_row(
@@ -916,6 +921,8 @@ def bench_cycle(
             f"{r['cycle_max_ms']:.0f}",
             f"{r['cycle_cpu_p95_ms']:.0f}",
             f"{100 * r['stage_share'].get('replay', 0.0):.0f} %",
+            f"{r['replay_workers_cpu_s']:.1f}",
+            "-" if r["replay_lag_p95_ms"] is None else f"{r['replay_lag_p95_ms']:.0f}",
         )
     Console().print(t)
 

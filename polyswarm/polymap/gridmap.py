@@ -39,6 +39,9 @@ class GridPolyMap(Merging, MapQueries):
         if not isinstance(self.cells, MappingProxyType):
             object.__setattr__(self, "cells", MappingProxyType(dict(self.cells)))
 
+    def __reduce__(self):  # pickled (to a replay process) as its cells, not its caches
+        return (GridPolyMap, (self.cell_size, dict(self.cells), self.version))
+
     def cell_index(self, x: float, y: float) -> CellIndex:
         return (math.floor(x / self.cell_size), math.floor(y / self.cell_size))
 

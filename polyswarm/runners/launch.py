@@ -449,16 +449,33 @@ def _record_pid(logs: Path, name: str, pid: int) -> None:
 
 
 def _rss_mb(child: Child | None) -> float | None:
-    """Resident memory of a child process (Linux /proc), megabytes."""
+    """Resident memory of a child process and its own children (the coordinator's replay
+    processes), from Linux /proc, megabytes."""
     if child is None or child.proc.poll() is not None:
         return None
-    try:
-        for line in Path(f"/proc/{child.proc.pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    except OSError:
-        return None
-    return None
+    total = None
+    for pid in _process_tree(child.proc.pid):
+        try:
+            for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total = (total or 0.0) + int(line.split()[1]) / 1024.0
+        except OSError:  # it has just exited
+            continue
+    return total
+
+
+def _process_tree(pid: int) -> list[int]:
+    """``pid`` and its descendants (Linux /proc)."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        try:
+            for task in Path(f"/proc/{p}/task").iterdir():
+                todo += [int(c) for c in (task / "children").read_text().split()]
+        except (OSError, ValueError):
+            continue
+    return out
 
 
 def _inject(fault: Fault, children: list[Child], logs: Path) -> None:

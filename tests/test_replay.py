@@ -1,0 +1,187 @@
+"""Robots' merges replayed on worker processes (``agents.replay``): real processes, the
+coordinator's mirror of each copy bit-identical to the robot's map."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import pytest
+
+from agents.coordinator import Coordinator
+from agents.replay import ReplayPool, apply_update
+from polyswarm.config import Config
+from polyswarm.errors import DeltaGapError, MapError
+from polyswarm.follow import Atlas
+from polyswarm.polymap import GridPolyMap, MergeOp, MergeOptions, cells_digest
+from protocols.messages import Pose
+from tests.conftest import F, O, rect
+
+OPTS = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
+# keyframe polygons of a robot driving along a corridor and into side rooms
+RECTS = [
+    (-0.5, -0.5, 3.3, 0.7, (O, F, O, F)),
+    (3.0, -0.5, 5.1, 0.7, (O, F, O, O)),
+    (4.2, 0.6, 4.9, 2.5, (O, O, O, F)),
+    (-0.4, 0.6, 0.4, 2.5, (O, O, F, O)),
+    (4.0, 2.4, 7.5, 4.1, (O, F, O, F)),
+]
+POLYS = [rect(*r) for r in RECTS]
+
+
+def shifted(r, dy: float):
+    x0, y0, x1, y1, types = r
+    return rect(x0, y0 + dy, x1, y1 + dy, types)
+
+
+def ops_of(polys) -> tuple[GridPolyMap, list[MergeOp]]:
+    """A robot's map after merging ``polys``, and the merges it sent."""
+    pmap, ops = GridPolyMap(2.0), []
+    for poly in polys:
+        res = pmap.merge(poly, OPTS)
+        digest = cells_digest(res.map.cells[i] for i in res.changed)
+        ops.append(MergeOp(2.0, pmap.version, res.map.version, poly, OPTS, digest))
+        pmap = res.map
+    return pmap, ops
+
+
+def same(a: GridPolyMap, b: GridPolyMap) -> bool:
+    return a.version == b.version and cells_digest(a.cells.values()) == cells_digest(
+        b.cells.values()
+    )
+
+
+def settle(c: Coordinator, timeout_s: float = 30.0) -> list:
+    """Everything the pool has been sent, collected (a worker starts in about 1 s)."""
+    out = c.drain(timeout_s)
+    assert not any(r.inflight for r in c.robots.values()), "the pool did not answer"
+    return out
+
+
+def with_pool(workers: int = 1, robots: int = 1) -> tuple[Coordinator, ReplayPool]:
+    starts = {f"r{k + 1}": (1.0 + k, 1.0, 0.0) for k in range(robots)}
+    c = Coordinator(Config(), starts)
+    pool = c.use_pool(ReplayPool(workers))
+    for rid, (x, y, _) in starts.items():
+        c.on_alive(rid, True)
+        c.on_pose(rid, 0.0, Pose(x, y, 0.0))
+    return c, pool
+
+
+def test_apply_update_gives_the_cells_a_merge_changed_and_refuses_a_gap():
+    robot, ops = ops_of(POLYS[:2])
+    m, atlas, delta = apply_update(None, Atlas(), "merge", ops[0])
+    m, atlas, delta = apply_update(m, atlas, "merge", ops[1])
+    assert same(m, robot)
+    assert {c.index for c in delta.cells} == {
+        i for i, c in robot.cells.items() if c.version == robot.version
+    }
+    assert apply_update(m, atlas, "merge", ops[1])[2] is None  # a duplicate: nothing
+    _, later = ops_of(POLYS[:3])
+    with pytest.raises(MapError):
+        apply_update(None, Atlas(), "merge", later[2])  # a first update not at version 0
+
+
+def test_merges_replayed_on_two_workers_keep_every_copy_bit_identical():
+    c, pool = with_pool(workers=2, robots=3)
+    with pool:
+        robots = {}
+        for k, rid in enumerate(c.robots):  # each robot its own corridor, 10 m apart
+            polys = [shifted(p, 10.0 * k) for p in RECTS]
+            robots[rid], ops = ops_of(polys)
+            for t, op in enumerate(ops):
+                assert c.on_robot_merge(rid, 0.1 * t, op) is None  # replayed elsewhere
+        got = settle(c)
+        assert len(got) == 3 * len(POLYS)  # one changed-cells delta per merge
+        assert all(not isinstance(d, MapError) for _, d in got)
+        for rid, robot in robots.items():
+            assert same(c.robot(rid).map, robot)
+        assert c.replayed_merges == 3 * len(POLYS)
+        assert len(c.worker_replay_cpu_ms) == 3 * len(POLYS)
+        c.flush()
+        area = sum(r.explored_area() for r in robots.values())
+        assert c.merged.explored_area() == pytest.approx(area, rel=1e-6)
+
+
+def test_a_lost_merge_asks_for_the_map_and_replays_go_on_after_it():
+    c, pool = with_pool()
+    with pool:
+        robot, ops = ops_of(POLYS)
+        c.on_robot_merge("r1", 0.1, ops[0])
+        c.on_robot_merge("r1", 0.2, ops[2])  # ops[1] was lost on the way
+        c.on_robot_merge("r1", 0.3, ops[3])  # fails the same: dropped with it
+        got = settle(c)
+        gaps = [d for _, d in got if isinstance(d, MapError)]
+        assert len(gaps) == 1 and isinstance(gaps[0], DeltaGapError)
+        assert c.robot("r1").map.version == ops[0].version  # nothing else applied
+        mid, _ = ops_of(POLYS[:4])
+        c.on_robot_map("r1", mid)  # the fetched map: the next merge replays on it
+        c.on_robot_merge("r1", 0.4, ops[4])
+        assert not any(isinstance(d, MapError) for _, d in settle(c))
+        assert same(c.robot("r1").map, robot)
+
+
+def test_a_killed_worker_is_restarted_with_the_maps_it_held():
+    c, pool = with_pool()
+    with pool:
+        robot, ops = ops_of(POLYS)
+        for op in ops[:3]:
+            c.on_robot_merge("r1", 0.1, op)
+        settle(c)
+        victim = pool.pids[0]
+        os.kill(victim, signal.SIGKILL)
+        deadline = time.monotonic() + 10.0
+        while pool.restarts == 0 and time.monotonic() < deadline:
+            c.collect(wait_s=0.1)  # notices, restarts it and gives it the mirror's map
+        assert pool.restarts == 1 and pool.pids[0] != victim
+        for op in ops[3:]:
+            c.on_robot_merge("r1", 0.2, op)
+        assert not any(isinstance(d, MapError) for _, d in settle(c))
+        assert same(c.robot("r1").map, robot)
+
+
+def test_results_of_updates_sent_before_a_whole_map_are_dropped():
+    c, pool = with_pool()
+    with pool:
+        robot, ops = ops_of(POLYS)
+        for op in ops:
+            c.on_robot_merge("r1", 0.1, op)
+        c.on_robot_map("r1", robot)  # a resync overtakes them
+        time.sleep(0.1)
+        assert settle(c) == []  # their cells are in the map given already
+        assert c.robot("r1").map is robot
+
+
+def test_workers_of_a_killed_coordinator_stop_themselves():
+    """SIGKILL of the coordinator's process leaves no replay process behind."""
+    import subprocess
+    import sys
+
+    code = (
+        "import time\n"
+        "from agents.replay import ReplayPool\n"
+        "pool = ReplayPool(2)\n"
+        "print(*pool.pids, flush=True)\n"
+        "time.sleep(60)\n"
+    )
+    parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        workers = [int(w) for w in parent.stdout.readline().split()]
+        assert len(workers) == 2 and all(_alive(w) for w in workers)
+        parent.kill()
+        parent.wait(10.0)
+        deadline = time.monotonic() + 20.0
+        while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(w) for w in workers)
+    finally:
+        parent.kill()
+
+
+def _alive(pid: int) -> bool:
+    try:  # a zombie has exited: its parent (here init) has not reaped it yet
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
