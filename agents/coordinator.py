@@ -488,6 +488,7 @@ class Coordinator:
     def on_robot_update(self, rid: str, stamp_s: float, kind: MapKind, wire: bytes):
         """A robot's map update as its MapChunk carried it: decoded and applied; for a
         merge or a correction the cells it changed (or None), for cells the delta itself.
+        With a replay pool it is only sent there: None (``collect`` has the outcome).
 
         Raises DecodeError on bad bytes, MapError (DeltaGapError) when it does not apply."""
         with self.timed("decode"):
