@@ -1122,7 +1122,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 r = np.asarray(coord.replay_cpu_ms or coord.worker_replay_cpu_ms)
                 log.info(
                     "replays%s: processor time p50 %.1f ms, p95 %.1f ms, %.1f s in all",
-                    f" on {pool.workers} processes" if pool is not None else "",
+                    "" if pool is None else f" on {pool.workers} process(es)",
                     np.median(r),
                     np.percentile(r, 95),
                     r.sum() / 1e3,

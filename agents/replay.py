@@ -68,8 +68,9 @@ def apply_update(
     pmap: GridPolyMap | None, atlas: Atlas, kind: str, op
 ) -> tuple[GridPolyMap, Atlas, MapDelta | None]:
     """One robot update applied to its map copy: the new map, atlas and the cells it
-    changed (None when it changed nothing). Raises MapError (a gap) when it does not
-    apply; the inputs are not changed."""
+    changed (None when it changed nothing). A merge adds its keyframe to ``atlas``; a
+    correction returns a new one. Raises MapError (a gap) when it does not apply, and
+    then changes nothing."""
     if pmap is None:
         if op.base_version > 0:
             raise MapError(f"the first update of a map starts at version {op.base_version}")
