@@ -185,3 +185,24 @@ def _alive(pid: int) -> bool:
             return f.read().split(")")[-1].split()[0] != "Z"
     except OSError:
         return False
+
+
+def test_launch_counts_a_childs_own_children_in_its_memory():
+    """The coordinator's memory in ``metrics.json`` includes its replay processes."""
+    import subprocess
+    from types import SimpleNamespace
+
+    from polyswarm.runners.launch import _process_tree, _rss_mb
+
+    proc = subprocess.Popen(["bash", "-c", "sleep 30 & wait"])
+    try:
+        deadline = time.monotonic() + 10.0
+        while len(_process_tree(proc.pid)) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        tree = _process_tree(proc.pid)
+        assert tree[0] == proc.pid and len(tree) == 2  # bash and its sleep
+        alone = _rss_mb(SimpleNamespace(proc=SimpleNamespace(pid=tree[1], poll=lambda: None)))
+        assert _rss_mb(SimpleNamespace(proc=proc)) > alone > 0.0
+    finally:
+        proc.kill()
+        proc.wait()

@@ -906,10 +906,12 @@ def bench_cycle(
         return
     target = res["target_p95_ms"]
     goal = "" if target is None else f" (target p95: {target:.0f} ms)"
-    where = f"{replay_workers} replay processes" if replay_workers else "replays on its thread"
+    where = "replays on its thread"
+    if replay_workers:
+        where = f"replays on {replay_workers} process(es)"
     t = Table(title=f"Coordinator cycle, {robots} robots, {where}{goal}")
-    cols = ("world", "simulated s", "cycles", "p50 ms", "p95 ms", "max ms", "processor p95 ms")
-    for col in (*cols, "replay share", "replay processes' s", "replay lag p95 ms"):
+    cols = ("world", "sim s", "cycles", "p50 ms", "p95 ms", "max ms", "cpu p95 ms")
+    for col in (*cols, "replay share", "pool cpu s", "pool lag p95 ms"):
         t.add_column(col, justify="left" if col == "world" else "right")
     for w, r in res["worlds"].items():
         t.add_row(
