@@ -988,7 +988,8 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
         pool = None
         try:
             if cfg.explore.replay_workers:
-                pool = coord.use_pool(ReplayPool(cfg.explore.replay_workers))
+                # the robots' map copies are journaled by the pool's processes
+                pool = coord.use_pool(ReplayPool(cfg.explore.replay_workers, state_dir))
             bus.subscribe(keys.all_robots("map/delta"), MapChunk)
             bus.subscribe(keys.all_robots("pose"), Pose)
             bus.subscribe(keys.all_robots("status"), RobotStatus)
@@ -1039,13 +1040,12 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
                         log.warning("%s: %s", item.key, e)
-                # replayed on the pool's processes; a merge waits for what is on its way
+                # replayed (and journaled) on the pool's processes; a merge waits for
+                # what is on its way
                 took = coord.drain(FLUSH_WAIT_S) if coord.flush_due() else coord.collect()
                 for rid, got in took:
                     if isinstance(got, MapError):
                         _resync(coord, rid, got, resync)
-                    else:
-                        _journal_cells(journal, coord, rid, got)
                 behind = set(coord.needs_resync()) - resync
                 coord.gaps += len(behind)  # a last delta lost: announced, never received
                 resync |= behind
@@ -1066,7 +1066,8 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         with owner.timed("fetch"):
                             owner.on_robot_map(rid, decode_any_map(got[0]))
                         resync.discard(rid)
-                        if owner is coord and coord.robot(rid).map is not before:
+                        mine = owner is coord and coord.pool is None  # else its worker's
+                        if mine and coord.robot(rid).map is not before:
                             with coord.timed("journal"):
                                 _journal(journal, "robot_map", rid, coord.robot(rid).map)
                     except PolyswarmError as e:
@@ -1102,10 +1103,8 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
         finally:
             anchoring.close()
             bus.close()
-            if pool is not None:  # what robots sent is replayed, journaled and merged below
-                for rid, got in coord.drain():
-                    if not isinstance(got, MapError):
-                        _journal_cells(journal, coord, rid, got)
+            if pool is not None:  # what robots sent is replayed and journaled, merged below
+                coord.drain()
                 pool.close()
             log.info(
                 "robot map updates: %d merges replayed, %d cell deltas applied, %d map fetches",

@@ -9,6 +9,7 @@ import time
 
 import pytest
 
+from agents import persist
 from agents.coordinator import Coordinator
 from agents.replay import ReplayPool, apply_update
 from polyswarm.config import Config
@@ -151,6 +152,21 @@ def test_results_of_updates_sent_before_a_whole_map_are_dropped():
         time.sleep(0.1)
         assert settle(c) == []  # their cells are in the map given already
         assert c.robot("r1").map is robot
+
+
+def test_workers_journal_the_robots_copies_for_a_restarted_coordinator(tmp_path):
+    """With a state folder the workers write each copy (a snapshot and the deltas
+    since) off the coordinator's thread; a restart reads back the same maps."""
+    c = Coordinator(Config(), {"r1": (1.0, 1.0, 0.0), "r2": (1.0, 11.0, 0.0)})
+    with c.use_pool(ReplayPool(2, str(tmp_path))):
+        robot1, ops = ops_of(POLYS)
+        for op in ops:
+            c.on_robot_merge("r1", 0.1, op)
+        robot2, _ = ops_of([shifted(r, 10.0) for r in RECTS[:3]])
+        c.on_robot_map("r2", robot2)  # a resync: a snapshot
+        settle(c)
+    _, robots = persist.load_coordinator(tmp_path)
+    assert same(robots["r1"], robot1) and same(robots["r2"], robot2)
 
 
 def test_workers_of_a_killed_coordinator_stop_themselves():
