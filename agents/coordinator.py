@@ -1069,7 +1069,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         mine = owner is coord and coord.pool is None  # else its worker's
                         if mine and coord.robot(rid).map is not before:
                             with coord.timed("journal"):
-                                _journal(journal, "robot_map", rid, coord.robot(rid).map)
+                                persist.record(journal, "robot_map", rid, coord.robot(rid).map)
                     except PolyswarmError as e:
                         log.warning("map of %s refused: %s", rid, e)
                 for solo in anchoring.coordinators():  # their maps are not published
@@ -1129,7 +1129,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
             if journal is not None:  # what the robots sent is merged before it is written
                 delta = coord.flush()
                 if delta is not None:
-                    _journal(journal, "merged", encode_delta(delta), coord.merged)
+                    persist.record(journal, "merged", encode_delta(delta), coord.merged)
     return coord
 
 
@@ -1165,19 +1165,9 @@ def _journal_cells(
     already encoded, as a cell delta arrives)."""
     if journal is None or changed is None:
         return
-    with coord.timed("journal"):
-        _journal(journal, "robot_delta", rid, wire or encode_delta(changed), coord.robot(rid).map)
-
-
-def _journal(journal: persist.CoordinatorJournal | None, what: str, *args) -> None:
-    """``journal.what(*args)`` if the coordinator keeps state; a full disk is logged, and
-    must not stop the mission."""
-    if journal is None:
-        return
-    try:
-        getattr(journal, what)(*args)
-    except OSError as e:
-        log.error("could not write the coordinator's state: %s", e)
+    with coord.timed("journal"):  # encoding it is the journal's work too
+        wire = wire or encode_delta(changed)
+        persist.record(journal, "robot_delta", rid, wire, coord.robot(rid).map)
 
 
 def _publish_delta(
@@ -1190,7 +1180,7 @@ def _publish_delta(
     if delta is None:
         return
     wire = encode_delta(delta)
-    _journal(journal, "merged", wire, coord.merged)  # on disk before anyone has seen it
+    persist.record(journal, "merged", wire, coord.merged)  # on disk before anyone has seen it
     coord.bytes_sent += bus.publish_map(
         keys.merged_delta, MapKind.DELTA, wire, delta.base_version, delta.version, coord.now
     )

@@ -255,6 +255,17 @@ class CoordinatorJournal:
             self._journaled[snapshot] = n + 1
 
 
+def record(journal: CoordinatorJournal | None, what: str, *args) -> None:
+    """``journal.what(*args)`` if the coordinator keeps state; a full disk is logged, and
+    must not stop the mission (the coordinator's thread and its replay processes)."""
+    if journal is None:
+        return
+    try:
+        getattr(journal, what)(*args)
+    except OSError as e:
+        log.error("could not write the coordinator's state: %s", e)
+
+
 def load_coordinator(state_dir: str | Path) -> tuple[GridPolyMap | None, dict]:
     """The merged map and the robots' maps a coordinator wrote (snapshots plus journals)."""
     merged_path, robots_dir = coordinator_paths(state_dir)

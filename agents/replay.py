@@ -117,7 +117,7 @@ def _worker(inbox, results: Connection, state_dir: str | None) -> None:
             if atlas is not None or rid not in atlases:
                 atlases[rid] = atlas if atlas is not None else Atlas()
             if pmap is not None:
-                _journal(journal, "robot_map", rid, pmap)
+                persist.record(journal, "robot_map", rid, pmap)
             continue
         _, rid, epoch, kind, op, stamp_s, sent_s = msg
         c0 = time.thread_time()
@@ -136,18 +136,8 @@ def _worker(inbox, results: Connection, state_dir: str | None) -> None:
         moved = largest_move_m(op) if kind == "correct" else 0.0
         cpu_ms = (time.thread_time() - c0) * 1e3
         if delta is not None:  # as the cells it changed: a restore needs no merge
-            _journal(journal, "robot_delta", rid, encode_delta(delta), pmap)
+            persist.record(journal, "robot_delta", rid, encode_delta(delta), pmap)
         results.send(Replayed(rid, epoch, kind, stamp_s, delta, None, cpu_ms, moved, sent_s))
-
-
-def _journal(journal: persist.CoordinatorJournal | None, what: str, *args) -> None:
-    """``journal.what(*args)``; a full disk is logged and must not stop the replays."""
-    if journal is None:
-        return
-    try:
-        getattr(journal, what)(*args)
-    except OSError as e:
-        log.error("could not write the coordinator's copy of a robot's map: %s", e)
 
 
 @dataclass
