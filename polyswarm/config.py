@@ -362,8 +362,9 @@ class ExploreConfig:
     end_confirm_s: float = num(3.0, 0.0, 3600.0)  # no reachable frontier this long: done
     return_home: bool = True  # robots drive back to their start when the mission ends
     # processes that replay the robots' merges and corrections for the coordinator, off
-    # its thread (agents.replay); 0 replays them on it. One is enough for a few robots on
-    # a small computer; a fleet of tens wants about one per spare core
+    # its thread (agents.replay); 0 replays them on it. With 25 robots one process ran
+    # 1.7 s behind on a 2-core machine (bench cycle): give a fleet of tens more, up to
+    # one per spare core
     replay_workers: int = num(1, 0, 64)
 
 
