@@ -421,6 +421,11 @@ class Coordinator:
                 self._set_map(info, info.map, info.atlas)
         return pool
 
+    def take_in(self) -> list[tuple[str, MapDelta | MapError]]:
+        """``collect``, or when a merge is due ``drain`` for up to ``FLUSH_WAIT_S``: a
+        robot's latest view must not miss the merge by a replay's time."""
+        return self.drain(FLUSH_WAIT_S) if self.flush_due() else self.collect()
+
     def drain(self, timeout_s: float = DRAIN_TIMEOUT_S) -> list[tuple[str, MapDelta | MapError]]:
         """``collect`` until the pool has replayed every update sent to it (or
         ``timeout_s`` passed)."""
@@ -1040,10 +1045,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
                         log.warning("%s: %s", item.key, e)
-                # replayed (and journaled) on the pool's processes; a merge waits for
-                # what is on its way
-                took = coord.drain(FLUSH_WAIT_S) if coord.flush_due() else coord.collect()
-                for rid, got in took:
+                for rid, got in coord.take_in():  # replayed and journaled on the pool
                     if isinstance(got, MapError):
                         _resync(coord, rid, got, resync)
                 behind = set(coord.needs_resync()) - resync

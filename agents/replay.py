@@ -10,8 +10,9 @@ Each worker process holds the copies of some robots' maps (and their ``Atlas``) 
 applies their updates in the order they were sent; it returns the cells each update
 changed. The coordinator keeps a mirror of every copy, updated from those cells (a
 dictionary update), so the merged map, planning and sightings read the mirror as before.
-Unpickling the changed cells costs about 2 % of replaying them (measured on a 3-robot
-maze run: 0.15 s against 7.5 s of processor time). When the coordinator keeps state,
+Taking the cells in, and waiting for them when a merge is due, was 11 % of the thread's
+work on the maze with 3 robots, where replaying had been 33 % (``polyswarm bench cycle``,
+stage shares ``collect`` and ``replay``). When the coordinator keeps state,
 the workers also journal the copies they hold (each delta flushed to disk): that was
 16 % of the coordinator thread's work in a 10-robot load run.
 

@@ -58,7 +58,7 @@ def explore_in_process(
     (``agents.replay``); with none it replays them itself, and a run is the same each time."""
     import shapely
 
-    from agents.coordinator import FLUSH_WAIT_S, Coordinator
+    from agents.coordinator import Coordinator
     from agents.replay import ReplayPool
     from agents.robot import RobotAgent
     from protocols.mapcodec import encode_updates
@@ -122,9 +122,7 @@ def explore_in_process(
                 continue
             if on_step is not None:
                 on_step(sim, agents, coord)
-            # replayed on the pool's processes; a merge waits for what is on its way
-            took = coord.drain(FLUSH_WAIT_S) if coord.flush_due() else coord.collect()
-            for rid, got in took:
+            for rid, got in coord.take_in():  # replayed on the pool's processes
                 if isinstance(got, MapError):  # the robot's map, as a resync fetches it
                     coord.on_robot_map(rid, agents[int(rid[1:]) - 1].slam.map)
             merged = coord.flush() if coord.flush_due() else None
