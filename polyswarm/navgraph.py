@@ -88,6 +88,14 @@ class CellGraph:
     all_pieces: int = 0
 
 
+@dataclass(frozen=True)
+class GraphPatch:
+    """Cells and borders of a graph recomputed by an update (None: gone)."""
+
+    cells: dict[CellIndex, CellGraph | None]
+    borders: dict[tuple[CellIndex, CellIndex], dict | None]
+
+
 @dataclass
 class NavGraph:
     radius: float  # metres kept from obstacle vectors
@@ -216,6 +224,32 @@ class NavGraph:
             else:
                 cg.nodes.setdefault((where[0], where[1], key), portal.mid)
         self.cells.update(fresh)
+
+    def patch(self, changed: set[CellIndex]) -> GraphPatch:
+        """The part of the graph an ``update(map, changed)`` recomputed: those cells and
+        the borders they share (None: gone), for ``apply`` on a copy elsewhere."""
+        pairs = {
+            ((i, j), n) if (i, j) < n else (n, (i, j))
+            for i, j in changed
+            for n in ((i + 1, j), (i, j + 1), (i - 1, j), (i, j - 1))
+        }
+        return GraphPatch(
+            {c: self.cells.get(c) for c in changed}, {p: self.borders.get(p) for p in pairs}
+        )
+
+    def apply(self, patch: GraphPatch) -> NavGraph:
+        """A ``patch`` of an identical graph applied (in place; returns self)."""
+        for c, cg in patch.cells.items():
+            if cg is None:
+                self.cells.pop(c, None)
+            else:
+                self.cells[c] = cg
+        for p, portals in patch.borders.items():
+            if portals is None:
+                self.borders.pop(p, None)
+            else:
+                self.borders[p] = portals
+        return self
 
     # -- queries ------------------------------------------------------------------------
 

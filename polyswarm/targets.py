@@ -118,6 +118,7 @@ def frontier_targets(
     reach=None,
     cache: TargetCache | None = None,
     sensor: Sensor | None = None,
+    facts: tuple | None = None,
 ) -> list[Target]:
     """Frontier segments with a reachable goal point, longest first.
 
@@ -130,10 +131,13 @@ def frontier_targets(
     Frontiers with no goal, or near a blacklisted point, are not targets.
     ``separation_m`` > 0 keeps one target per neighbourhood (the longest frontier).
     ``cache`` (kept by the caller between calls) saves recomputing segments whose
-    surroundings did not change; the result is the same with or without it."""
+    surroundings did not change; the result is the same with or without it. ``facts``:
+    ``map_facts`` of this map and graph, computed elsewhere (``agents.merger``)."""
     sensor = sensor or Sensor()
     usable = graph.has_node if reach is None else reach.reaches
-    segs, facts, gains = _map_facts(pmap, graph, min_length_m, max_length_m, cache, sensor)
+    if facts is None:
+        facts = map_facts(pmap, graph, min_length_m, max_length_m, cache, sensor)
+    segs, facts, gains = facts
     if not segs:
         return []
     out = []
@@ -170,9 +174,10 @@ def frontier_targets(
     return out
 
 
-def _map_facts(pmap, graph, min_length_m, max_length_m, cache, sensor) -> tuple:
+def map_facts(pmap, graph, min_length_m, max_length_m, cache=None, sensor=None) -> tuple:
     """The frontier segments of ``pmap``, their facts and the unexplored area behind
     each: what depends on the map and its graph alone (``frontier_targets``)."""
+    sensor = sensor or Sensor()
     params = (min_length_m, max_length_m, sensor)
     last = cache.last if cache is not None else None
     if last is not None and last[0] is pmap and last[1] is graph and last[2] == params:
