@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agents import persist
+from agents.merger import MergeJob, MergeLostError, MergeProcess, merge_step
 from agents.replay import Replayed, ReplayPool
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
@@ -169,6 +170,13 @@ class Coordinator:
     ) -> None:
         self.cfg = cfg
         self.pool = pool
+        self.merger: MergeProcess | None = None  # merging on a process (``use_merger``)
+        self._in_merge: tuple[dict, set] | None = None  # the job's robots' cells, rebuilds
+        self._merge_sent_s = 0.0  # when the merge process's job was sent (perf_counter)
+        self._fresh = False  # a merge came in since the last plan
+        self._facts: tuple | None = None  # (merged map version, its frontier facts)
+        self.merge_lag_ms: list[float] = []  # wall time from sending a merge job to applying it
+        self.merger_cpu_ms: list[float] = []  # the merge process's processor time per job
         self.worker_replay_cpu_ms: list[float] = []  # the pool's processor time per update
         self.replay_lag_ms: list[float] = []  # wall time from sending an update to taking it in
         self.strategy = Strategy(cfg.explore.strategy)
@@ -245,6 +253,8 @@ class Coordinator:
             self.merged = merged
             self.graph = NavGraph.for_robot(merged, self.cfg.nav)
             self._index = None
+            if self.merger is not None:
+                self.merger.reset(merged)
         for rid, pmap in robot_maps.items():
             self._set_map(self.robot(rid), pmap)
             # cells applied but not merged when the old process died are merged now
@@ -424,7 +434,7 @@ class Coordinator:
     def take_in(self) -> list[tuple[str, MapDelta | MapError]]:
         """``collect``, or when a merge is due ``drain`` for up to ``FLUSH_WAIT_S``: a
         robot's latest view must not miss the merge by a replay's time."""
-        return self.drain(FLUSH_WAIT_S) if self.flush_due() else self.collect()
+        return self.drain(FLUSH_WAIT_S) if self._merge_due() else self.collect()
 
     def drain(self, timeout_s: float = DRAIN_TIMEOUT_S) -> list[tuple[str, MapDelta | MapError]]:
         """``collect`` until the pool has replayed every update sent to it (or
@@ -524,56 +534,106 @@ class Coordinator:
         self._pending.setdefault(rid, set()).update(pmap.cells)
 
     def flush_due(self) -> bool:
-        changed = self._pending or any(r.inflight for r in self.robots.values())
-        return bool(changed) and self.now - self._last_flush >= MERGE_PERIOD_S
+        if self.merger is not None and self.merger.ready():
+            return True  # a merge came in: publish it
+        return self._merge_due()
 
-    def flush(self) -> MapDelta | None:
+    def _merge_due(self) -> bool:
+        changed = self._pending or any(r.inflight for r in self.robots.values())
+        busy = self.merger is not None and self.merger.busy
+        return bool(changed) and not busy and self.now - self._last_flush >= MERGE_PERIOD_S
+
+    def flush(self, wait_s: float = 0.0) -> MapDelta | None:
         """Merge the robots' cells changed since the last flush; the merged map's delta.
+        With a merge process: apply its last job's result (waiting up to ``wait_s`` for
+        it) and send it the cells changed since; the delta is what came in.
 
         A cell that fails to merge is logged and stays in its robot's map; the robot's
         next change of it, or a resync, retries it."""
         self._last_flush = self.now
-        if not self._pending:
-            return None
-        t0, c0 = time.perf_counter(), time.thread_time()
         base = self.merged.version
-        rebuilt = self._rebuild_cells()
-        queue = []
-        for rid, idxs in sorted(self._pending.items()):
-            m = self.robots[rid].map
-            queue += [m.cells[i] for i in sorted(idxs - rebuilt) if m is not None and i in m.cells]
-        self._pending.clear()
-        self._merge_batch(queue)
-        delta = None
-        if self.merged.version != base:
-            delta = self.merged.delta_since(base)
-            self.graph.update(self.merged, {c.index for c in delta.cells})
-            self._index = None
-        self.spent("merge", (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
-        return delta
+        if self.merger is not None:
+            self._merge_on_process(wait_s)
+        elif self._pending:
+            t0, c0 = time.perf_counter(), time.thread_time()
+            self.merged, delta = merge_step(self.merged, self.graph, self._merge_job())
+            self._index = None if delta is not None else self._index
+            self.spent("merge", (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
+        return None if self.merged.version == base else self.merged.delta_since(base)
 
-    def _rebuild_cells(self) -> set:
-        """Merge afresh, from every robot's copy, the merged cells robots' corrections
-        changed (their neighbours' cells come along: borders are typed against them);
-        the indices rebuilt."""
-        if not self._rebuild:
-            return set()
+    def _merge_job(self) -> MergeJob:
+        """The robots' cells changed since the last merge, and every robot's cells around
+        the merged cells corrections changed (those are merged afresh: a ghost wall or
+        a frontier a correction closed leaves the merged map too)."""
         todo, self._rebuild = self._rebuild, set()
         reach = {(i + di, j + dj) for i, j in todo for di in (-1, 0, 1) for dj in (-1, 0, 1)}
-        cells = [
+        rebuild = [
             r.map.cells[ix]
             for r in sorted(self.robots.values(), key=lambda r: r.id)
             if r.map is not None
             for ix in sorted(reach)
             if ix in r.map.cells
         ]
-        try:
-            fresh = GridPolyMap(self.merged.cell_size).merge_cells(cells, self._merge_options)
-        except PolyswarmError as e:  # the cells keep their content; robots' next changes retry
-            log.error("merged cells could not be rebuilt after a correction: %s", e)
-            return set()
-        self.merged, _ = self.merged.with_cells_of(fresh.map, todo)
-        return todo
+        cells = []
+        for rid, idxs in sorted(self._pending.items()):
+            m = self.robots[rid].map
+            cells += [m.cells[i] for i in sorted(idxs - todo) if m is not None and i in m.cells]
+        self._pending = {}
+        e = self.cfg.explore
+        facts = (e.min_frontier_length_m, e.max_frontier_length_m, self.sensor)
+        return MergeJob(
+            tuple(cells),
+            frozenset(todo),
+            tuple(rebuild),
+            self._merge_options,
+            facts,
+            time.perf_counter(),
+        )
+
+    def _merge_on_process(self, wait_s: float) -> None:
+        """Apply the merge process's result, if in; send it the next job, if any."""
+        with self.timed("merge"):
+            try:
+                got = self.merger.result(wait_s)
+            except MergeLostError as e:  # its cells go again, with the map as it is here
+                log.error("%s: merging its cells again", e)
+                self._requeue()
+                self.merger.reset(self.merged)
+                got = None
+            if got is not None:
+                self._in_merge = None
+                self.merger_cpu_ms.append(got.cpu_ms)
+                self.merge_lag_ms.append((time.perf_counter() - got.sent_s) * 1e3)
+                if got.delta is not None:
+                    self.merged = self.merged.apply_delta(got.delta)
+                    self.graph.apply(got.patch)
+                    self._index, self._facts = got.index, (self.merged.version, got.facts)
+                self._fresh = True
+            if self._pending and not self.merger.busy:
+                self._in_merge = ({k: set(v) for k, v in self._pending.items()}, set(self._rebuild))
+                self.merger.submit(self._merge_job())
+                if wait_s > 0:
+                    self._merge_on_process(wait_s)
+
+    def _requeue(self) -> None:
+        """A lost merge job's cells are pending again."""
+        if self._in_merge is None:
+            return
+        pending, rebuild = self._in_merge
+        for rid, idxs in pending.items():
+            self._pending.setdefault(rid, set()).update(idxs)
+        self._rebuild |= rebuild
+        self._in_merge = None
+
+    def use_merger(self, merger: MergeProcess) -> MergeProcess:
+        """Merge on ``merger``'s process from now on (it is given the merged map)."""
+        self.merger = merger
+        merger.reset(self.merged)
+        return merger
+
+    def _unmerged(self, rid: str) -> bool:
+        """Are some of the robot's cells not in the merged map yet?"""
+        return rid in self._pending or (self._in_merge is not None and rid in self._in_merge[0])
 
     def spent(self, stage: str, wall_ms: float, cpu_ms: float) -> None:
         """Work done in the coordinator's thread: counted into the next cycle's time."""
@@ -601,26 +661,19 @@ class Coordinator:
         total = sum(self.stage_ms.values())
         return {k: v / total for k, v in sorted(self.stage_ms.items())} if total else {}
 
-    def _merge_batch(self, cells: list) -> None:
-        try:
-            self.merged = self.merged.merge_cells(cells, self._merge_options).map
-            return
-        except PolyswarmError as e:
-            if len(cells) == 1:
-                log.error(
-                    "cell %s could not be merged (kept in the robot's map): %s", cells[0].index, e
-                )
-                return
-        for c in cells:  # find the bad cell; merge the others
-            self._merge_batch([c])  # (a rare path: GEOS failed on this batch)
-
     # -- the cycle -------------------------------------------------------------------------
 
     def due(self) -> bool:
+        if self.merger is not None and self.merger.busy and not self.merger.ready():
+            return False  # planning waits for the merge on its way, as it would here
         return self._wake or self.now - self._last_cycle >= self.cfg.explore.cycle_period_s
 
     def cycle(self) -> Outgoing:
         out = Outgoing(merged_delta=self.flush())
+        if self.merger is not None and self.merger.busy and not self._fresh:
+            self._wake = True  # plan on the map the merge process is making
+            return out
+        self._fresh = False
         t0, c0 = time.perf_counter(), time.thread_time()
         self._last_cycle = self.now
         self._wake = False
@@ -734,6 +787,7 @@ class Coordinator:
             reach=reach,
             cache=self._target_cache,
             sensor=self.sensor,
+            facts=self._facts[1] if self._facts and self._facts[0] == self.merged.version else None,
         )
         # keep ids: a target near last cycle's is the same target
         old_ids = list(self.targets)
@@ -869,7 +923,7 @@ class Coordinator:
         must not blame a target for a view it has not merged yet)"""
         if r.reached_t is None or r.pose_t - r.reached_t < REACHED_GRACE_S:
             return False
-        return r.map is not None and r.map.version >= r.announced and r.id not in self._pending
+        return r.map is not None and r.map.version >= r.announced and not self._unmerged(r.id)
 
     def _look_failed(self, r: RobotInfo, a: Assignment) -> bool:
         """Did the robot look at its frontier from within sensor range and leave it open
@@ -990,11 +1044,13 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
             )
     with open_session(session_spec) as session:
         bus = Bus(session, "coordinator")
-        pool = None
+        pool = merger = None
         try:
             if cfg.explore.replay_workers:
                 # the robots' map copies are journaled by the pool's processes
                 pool = coord.use_pool(ReplayPool(cfg.explore.replay_workers, state_dir))
+            if cfg.explore.merge_process:
+                merger = coord.use_merger(MergeProcess(coord.merged, cfg.nav))
             bus.subscribe(keys.all_robots("map/delta"), MapChunk)
             bus.subscribe(keys.all_robots("pose"), Pose)
             bus.subscribe(keys.all_robots("status"), RobotStatus)
@@ -1108,6 +1164,12 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
             if pool is not None:  # what robots sent is replayed and journaled, merged below
                 coord.drain()
                 pool.close()
+            if journal is not None:  # what the robots sent is merged before it is written
+                delta = coord.flush(wait_s=DRAIN_TIMEOUT_S)
+                if delta is not None:
+                    persist.record(journal, "merged", encode_delta(delta), coord.merged)
+            if merger is not None:
+                merger.close()
             log.info(
                 "robot map updates: %d merges replayed, %d cell deltas applied, %d map fetches",
                 coord.replayed_merges,
@@ -1119,6 +1181,14 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                     "coordinator thread's work by stage: %s",
                     ", ".join(f"{k} {v:.0%}" for k, v in coord.stage_shares().items()),
                 )
+            if coord.merger_cpu_ms:
+                log.info(
+                    "merges on their process: processor time p95 %.1f ms, %.1f s in all; "
+                    "sent to taken in p95 %.0f ms",
+                    np.percentile(coord.merger_cpu_ms, 95),
+                    sum(coord.merger_cpu_ms) / 1e3,
+                    np.percentile(coord.merge_lag_ms, 95),
+                )
             if coord.replay_cpu_ms or coord.worker_replay_cpu_ms:
                 r = np.asarray(coord.replay_cpu_ms or coord.worker_replay_cpu_ms)
                 log.info(
@@ -1128,10 +1198,6 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                     np.percentile(r, 95),
                     r.sum() / 1e3,
                 )
-            if journal is not None:  # what the robots sent is merged before it is written
-                delta = coord.flush()
-                if delta is not None:
-                    persist.record(journal, "merged", encode_delta(delta), coord.merged)
     return coord
 
 

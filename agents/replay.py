@@ -101,16 +101,7 @@ def _worker(inbox, results: Connection, state_dir: str | None) -> None:
     maps: dict[str, GridPolyMap | None] = {}
     atlases: dict[str, Atlas] = {}
     journal = persist.CoordinatorJournal(state_dir) if state_dir else None
-    parent = mp.parent_process()
-    while True:
-        try:
-            raw = inbox.get(timeout=PARENT_CHECK_S)
-        except queue.Empty:
-            if parent is not None and not parent.is_alive():
-                return  # the coordinator was killed: no orphans left behind
-            continue
-        if raw is None:
-            return
+    while (raw := receive(inbox)) is not None:
         msg = pickle.loads(raw)
         if msg[0] == "set":
             _, rid, epoch, pmap, atlas = msg
@@ -141,11 +132,50 @@ def _worker(inbox, results: Connection, state_dir: str | None) -> None:
         results.send(Replayed(rid, epoch, kind, stamp_s, delta, None, cpu_ms, moved, sent_s))
 
 
+def receive(inbox) -> bytes | None:
+    """A worker's next message (None: stop). While idle it checks every
+    ``PARENT_CHECK_S`` whether the coordinator still lives: one killed with SIGKILL
+    cannot stop its workers, they stop themselves."""
+    parent = mp.parent_process()
+    while True:
+        try:
+            return inbox.get(timeout=PARENT_CHECK_S)
+        except queue.Empty:
+            if parent is not None and not parent.is_alive():
+                return None  # no orphans left behind
+
+
 @dataclass
-class _Worker:
+class Worker:
     proc: mp.Process
-    inbox: object  # multiprocessing Queue: updates in (a feeder thread sends, never blocks)
+    inbox: object  # multiprocessing Queue: messages in (a feeder thread sends, never blocks)
     results: Connection  # its own pipe out: a killed worker cannot hold a lock others need
+
+
+def start_process(ctx, target, state_dir: str | None) -> Worker:
+    """A worker process running ``target(inbox, results, state_dir)``."""
+    inbox = ctx.Queue()
+    results, out = ctx.Pipe(duplex=False)
+    p = ctx.Process(target=target, args=(inbox, out, state_dir), daemon=True)
+    p.start()
+    out.close()  # the worker's end
+    return Worker(p, inbox, results)
+
+
+def stop_process(w: Worker, timeout_s: float | None) -> None:
+    """Stop a worker: asked to (``timeout_s`` None: within ``STOP_TIMEOUT_S``), or
+    after ``timeout_s``, terminated."""
+    if timeout_s is None:
+        with contextlib.suppress(OSError, ValueError):
+            w.inbox.put(None)
+        timeout_s = STOP_TIMEOUT_S
+    w.proc.join(timeout_s)
+    if w.proc.is_alive():
+        w.proc.terminate()
+        w.proc.join(1.0)
+    w.results.close()
+    w.inbox.close()
+    w.inbox.cancel_join_thread()
 
 
 class ReplayPool:
@@ -172,14 +202,8 @@ class ReplayPool:
         """The workers' process ids (a supervisor's or a test's view)."""
         return [w.proc.pid for w in self._workers]
 
-    def _start_worker(self) -> _Worker:
-        inbox = self._ctx.Queue()
-        results, out = self._ctx.Pipe(duplex=False)
-        args = (inbox, out, self._state_dir)
-        p = self._ctx.Process(target=_worker, args=args, daemon=True)
-        p.start()
-        out.close()  # the worker's end
-        return _Worker(p, inbox, results)
+    def _start_worker(self) -> Worker:
+        return start_process(self._ctx, _worker, self._state_dir)
 
     def _worker_of(self, rid: str) -> int:
         if rid not in self._home:
@@ -214,21 +238,11 @@ class ReplayPool:
         for k in sorted(dead):
             old = self._workers[k]
             log.error("replay worker %d exited (code %s): restarting it", k, old.proc.exitcode)
-            self._stop(old, 0.0)
+            stop_process(old, 0.0)
             self.restarts += 1
             self._workers[k] = self._start_worker()
             lost += [rid for rid, home in self._home.items() if home == k]
         return done, lost
-
-    @staticmethod
-    def _stop(w: _Worker, timeout_s: float) -> None:
-        w.proc.join(timeout_s)
-        if w.proc.is_alive():
-            w.proc.terminate()
-            w.proc.join(1.0)
-        w.results.close()
-        w.inbox.close()
-        w.inbox.cancel_join_thread()
 
     def close(self) -> None:
         for w in self._workers:
@@ -236,7 +250,7 @@ class ReplayPool:
                 w.inbox.put(None)
         deadline = time.monotonic() + STOP_TIMEOUT_S
         for w in self._workers:
-            self._stop(w, max(0.0, deadline - time.monotonic()))
+            stop_process(w, max(0.0, deadline - time.monotonic()))
 
     def __enter__(self) -> ReplayPool:
         return self

@@ -366,6 +366,10 @@ class ExploreConfig:
     # 1.7 s behind on a 2-core machine (bench cycle): give a fleet of tens more, up to
     # one per spare core
     replay_workers: int = num(1, 0, 64)
+    # merge robots' cells into the merged map, update its navigation graph and frontier
+    # facts on a process of its own (agents.merger), while the coordinator plans on the
+    # map it has; false: on its thread
+    merge_process: bool = True
 
 
 @dataclass(frozen=True)

@@ -49,16 +49,19 @@ def explore_in_process(
     on_pose: Callable[[int, float, object], None] | None = None,
     sightings: bool | None = None,
     replay_workers: int = 0,
+    merge_process: bool = False,
 ) -> InProcessRun:
     """``on_step(sim, agents, coordinator)`` is called after every simulation step with
     scans (for instrumentation); ``on_pose(robot index, time s, Pose)`` with every pose
     an agent sends. ``start_poses`` (x m, y m, theta rad) per robot: the robots' true
     starts, also given to the coordinator (default: side by side at the world's start).
     ``replay_workers`` processes replay the robots' merges for the coordinator
-    (``agents.replay``); with none it replays them itself, and a run is the same each time."""
+    (``agents.replay``); with none it replays them itself, and a run is the same each time.
+    ``merge_process``: merge on a process of its own (``agents.merger``)."""
     import shapely
 
     from agents.coordinator import Coordinator
+    from agents.merger import MergeProcess
     from agents.replay import ReplayPool
     from agents.robot import RobotAgent
     from protocols.mapcodec import encode_updates
@@ -78,6 +81,7 @@ def explore_in_process(
         a.sightings = sightings
     coord = Coordinator(cfg, {a.id: a.start_pose for a in agents})
     pool = coord.use_pool(ReplayPool(replay_workers)) if replay_workers else None
+    merger = coord.use_merger(MergeProcess(coord.merged, cfg.nav)) if merge_process else None
     for a in agents:
         coord.on_alive(a.id, True)
     delta_bytes = 0
@@ -87,7 +91,11 @@ def explore_in_process(
     tol = coverage_tolerance(lid.noise_sigma_m, lid.noise_sigma_per_m, res)
     free = reachable_free(world.free, cfg.sim.robot.radius_m, starts, tol)
     next_sample = 0.0
-    with Simulation(world, cfg.sim, robots, start_poses=starts) as sim, _closing(pool):
+    with (
+        Simulation(world, cfg.sim, robots, start_poses=starts) as sim,
+        _closing(pool),
+        _closing(merger),
+    ):
         while sim.time < sim_s:
             events = sim.step()
             for ev in events:
@@ -125,13 +133,13 @@ def explore_in_process(
             for rid, got in coord.take_in():  # replayed on the pool's processes
                 if isinstance(got, MapError):  # the robot's map, as a resync fetches it
                     coord.on_robot_map(rid, agents[int(rid[1:]) - 1].slam.map)
-            merged = coord.flush() if coord.flush_due() else None
+            deltas = [coord.flush()] if coord.flush_due() else []
             if coord.due():
                 o = coord.cycle()
-                merged = merged or o.merged_delta  # a cycle right after a flush merges nothing
+                deltas.append(o.merged_delta)
                 for rid, asg in o.assignments.items():
                     agents[int(rid[1:]) - 1].on_assignment(asg, sim.time)
-            if merged is not None:
+            for merged in filter(None, deltas):
                 for b in agents:
                     if b.merged is None:
                         b.on_merged_map(coord.merged)

@@ -884,6 +884,9 @@ def bench_cycle(
     replay_workers: int = typer.Option(
         1, min=0, help="Processes replaying robots' merges (0: on the coordinator's thread)."
     ),
+    merge_process: bool = typer.Option(
+        True, help="Merge and update the graph on a process of its own (else on the thread)."
+    ),
 ) -> None:
     """The coordinator's cycle per world, all its work included (replays, merge, plan)."""
     from rich.console import Console
@@ -899,6 +902,7 @@ def bench_cycle(
             seed,
             lambda what: status.update(f"cycle: {what}"),
             replay_workers,
+            merge_process,
         )
     _save(save, res)
     if as_json:
@@ -909,9 +913,10 @@ def bench_cycle(
     where = "replays on its thread"
     if replay_workers:
         where = f"replays on {replay_workers} process(es)"
+    where += ", merges on a process" if merge_process else ", merges on its thread"
     t = Table(title=f"Coordinator cycle, {robots} robots, {where}{goal}")
     cols = ("world", "sim s", "cycles", "p50 ms", "p95 ms", "max ms", "cpu p95 ms")
-    for col in (*cols, "replay share", "pool cpu s", "pool lag p95 ms"):
+    for col in (*cols, "pool cpu s", "pool lag p95 ms", "merger cpu s", "merge lag p95 ms"):
         t.add_column(col, justify="left" if col == "world" else "right")
     for w, r in res["worlds"].items():
         t.add_row(
@@ -922,9 +927,10 @@ def bench_cycle(
             f"{r['cycle_p95_ms']:.0f}",
             f"{r['cycle_max_ms']:.0f}",
             f"{r['cycle_cpu_p95_ms']:.0f}",
-            f"{100 * r['stage_share'].get('replay', 0.0):.0f} %",
             f"{r['replay_workers_cpu_s']:.1f}",
             "-" if r["replay_lag_p95_ms"] is None else f"{r['replay_lag_p95_ms']:.0f}",
+            f"{r['merge_process_cpu_s']:.1f}",
+            "-" if r["merge_lag_p95_ms"] is None else f"{r['merge_lag_p95_ms']:.0f}",
         )
     Console().print(t)
 

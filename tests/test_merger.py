@@ -1,0 +1,132 @@
+"""Merging on a process of its own (``agents.merger``): a real process, the coordinator's
+merged map, graph and frontier facts the same as merging on its own thread."""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+
+import numpy as np
+
+from agents.coordinator import Coordinator
+from agents.merger import MergeProcess
+from polyswarm.config import Config
+from polyswarm.navgraph import NavGraph
+from polyswarm.targets import map_facts
+from protocols.messages import Pose
+from tests.test_replay import RECTS, ops_of, same, shifted
+
+
+def coordinators(robots: int = 3) -> tuple[Coordinator, Coordinator, MergeProcess]:
+    """Two coordinators: one merging on its thread, one on a merge process."""
+    starts = {f"r{k + 1}": (1.0, 1.0 + 10.0 * k, 0.0) for k in range(robots)}
+    here, there = Coordinator(Config(), starts), Coordinator(Config(), starts)
+    merger = there.use_merger(MergeProcess(there.merged, there.cfg.nav))
+    for c in (here, there):
+        for rid, (x, y, _) in starts.items():
+            c.on_alive(rid, True)
+            c.on_pose(rid, 0.0, Pose(x, y, 0.0))
+    return here, there, merger
+
+
+def feed(cs: tuple[Coordinator, ...], first: int, last: int) -> None:
+    """Robot k drives its own corridor (10 m apart, the first two overlapping)."""
+    for k in range(3):
+        dy = 10.0 if k == 2 else 0.3 * k
+        polys = [shifted(r, dy) for r in RECTS]
+        _, ops = ops_of(polys)
+        for c in cs:
+            for t, op in enumerate(ops[first:last]):
+                c.on_robot_merge(f"r{k + 1}", 0.1 * t, op)
+
+
+def merged_there(c: Coordinator) -> None:
+    """Flush until the merge process has merged everything sent (it starts in ~1 s)."""
+    for _ in range(5):
+        c.flush(wait_s=30.0)
+        if not c.merger.busy and not c._pending:
+            return
+    raise AssertionError("the merge process did not answer")
+
+
+def same_graph(a: NavGraph, b: NavGraph) -> bool:
+    def flat(g: NavGraph) -> list:
+        nodes = sorted((n, tuple(p)) for cg in g.cells.values() for n, p in cg.nodes.items())
+        groups = [*(cg.internal for cg in g.cells.values()), *g.borders.values()]
+        portals = sorted(
+            (e, tuple(p.a), tuple(p.b), p.tight) for grp in groups for e, p in grp.items()
+        )
+        return [nodes, portals, sorted(g.borders)]
+
+    return flat(a) == flat(b)
+
+
+def test_a_merge_process_gives_the_map_graph_and_facts_of_a_merge_here():
+    here, there, merger = coordinators()
+    with merger:
+        for first, last in ((0, 2), (2, 5)):  # two rounds: the second changes the first's
+            feed((here, there), first, last)
+            d_here = here.flush()
+            assert there.flush() is None  # sent to the process: nothing in yet
+            merged_there(there)
+            assert same(there.merged, here.merged) and d_here is not None
+            assert same_graph(there.graph, here.graph)
+        e = there.cfg.explore
+        mine = map_facts(here.merged, here.graph, e.min_frontier_length_m, e.max_frontier_length_m)
+        assert len(mine[0]) >= 2  # the corridors' open ends
+        version, theirs = there._facts
+        assert version == there.merged.version
+        assert [s.points.tolist() for s in theirs[0]] == [s.points.tolist() for s in mine[0]]
+        assert [f.sliver for f in theirs[1]] == [f.sliver for f in mine[1]]
+        assert np.array_equal(theirs[2], mine[2])
+        assert len(there.merger_cpu_ms) == 2 and len(there.merge_lag_ms) == 2
+        # planning on either gives the same targets
+        for c in (here, there):
+            c.cycle()
+        assert sorted(t.goal.tolist() for t in here.targets.values()) == sorted(
+            t.goal.tolist() for t in there.targets.values()
+        )
+
+
+def test_a_killed_merge_process_is_restarted_and_its_cells_merged_again():
+    here, there, merger = coordinators()
+    with merger:
+        feed((here, there), 0, 2)
+        here.flush()
+        merged_there(there)
+        victim = merger.pid
+        os.kill(victim, signal.SIGKILL)  # the next job goes to a dead process
+        feed((here, there), 2, 5)
+        here.flush()
+        there.flush()
+        assert merger.busy
+        merged_there(there)  # notices, restarts it with the map here, sends the cells again
+        assert merger.restarts == 1 and merger.pid != victim
+        assert same(there.merged, here.merged)
+        assert same_graph(there.graph, here.graph)
+
+
+def test_a_graph_patch_brings_a_copy_to_the_updated_graph():
+    before, _ = ops_of([shifted(r, 0.0) for r in RECTS[:3]])
+    after, _ = ops_of([shifted(r, 0.0) for r in RECTS])
+    nav = Config().nav
+    g = NavGraph.for_robot(before, nav)
+    copy = pickle.loads(pickle.dumps(g))
+    changed = {i for i, c in after.cells.items() if c.version > before.version}
+    changed |= set(before.cells) - set(after.cells)
+    assert changed
+    g.update(after, changed)
+    copy.apply(pickle.loads(pickle.dumps(g.patch(changed))))
+    assert same_graph(copy, g) and not same_graph(copy, NavGraph.for_robot(before, nav))
+    assert same_graph(g, NavGraph.for_robot(after, nav))
+
+
+def test_a_cell_pickles_as_its_content_and_region_only():
+    pmap, _ = ops_of([shifted(r, 0.0) for r in RECTS])
+    cell = max(pmap.cells.values(), key=lambda c: c.vector_count)
+    _ = cell.region, cell.vectors, cell.wall_zone(0.1)  # caches filled
+    back = pickle.loads(pickle.dumps(cell))
+    assert back.same_content(cell) and back.version == cell.version
+    assert back.__dict__["region"].equals_exact(cell.region, 0.0)
+    assert "vectors" not in back.__dict__ and "_wall_zones" not in back.__dict__
