@@ -99,7 +99,7 @@ def test_a_killed_merge_process_is_restarted_and_its_cells_merged_again():
         os.kill(victim, signal.SIGKILL)  # the next job goes to a dead process
         feed((here, there), 2, 5)
         here.flush()
-        there.flush()
+        there.flush(send=True)  # within the merge period: sent only when asked to
         assert merger.busy
         merged_there(there)  # notices, restarts it with the map here, sends the cells again
         assert merger.restarts == 1 and merger.pid != victim
@@ -130,3 +130,19 @@ def test_a_cell_pickles_as_its_content_and_region_only():
     assert back.same_content(cell) and back.version == cell.version
     assert back.__dict__["region"].equals_exact(cell.region, 0.0)
     assert "vectors" not in back.__dict__ and "_wall_zones" not in back.__dict__
+
+
+def test_a_cycle_plans_on_the_last_merge_while_the_next_is_on_its_way():
+    """With many robots the merge process is never idle: a cycle must not wait for a
+    job when a newer map than its last plan's is in (25 robots: 18 cycles in 60 s)."""
+    _, there, merger = coordinators()
+    with merger:
+        feed((there,), 0, 2)
+        merged_there(there)  # a merge is in, not planned on yet
+        feed((there,), 2, 5)
+        there.flush(send=True)  # the next one on its way
+        assert merger.busy
+        assert there.due()
+        there.cycle()
+        assert len(there.cycle_ms) == 1  # planned, not put off
+        merged_there(there)

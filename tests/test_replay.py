@@ -181,21 +181,25 @@ def test_workers_journal_the_robots_copies_for_a_restarted_coordinator(tmp_path)
 
 
 def test_workers_of_a_killed_coordinator_stop_themselves():
-    """SIGKILL of the coordinator's process leaves no replay process behind."""
+    """SIGKILL of the coordinator's process leaves no replay or merge process behind."""
     import subprocess
     import sys
 
     code = (
         "import time\n"
+        "from agents.merger import MergeProcess\n"
         "from agents.replay import ReplayPool\n"
+        "from polyswarm.config import Config\n"
+        "from polyswarm.polymap import GridPolyMap\n"
         "pool = ReplayPool(2)\n"
-        "print(*pool.pids, flush=True)\n"
+        "merger = MergeProcess(GridPolyMap(2.0), Config().nav)\n"
+        "print(*pool.pids, merger.pid, flush=True)\n"
         "time.sleep(60)\n"
     )
     parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
     try:
         workers = [int(w) for w in parent.stdout.readline().split()]
-        assert len(workers) == 2 and all(_alive(w) for w in workers)
+        assert len(workers) == 3 and all(_alive(w) for w in workers)
         parent.kill()
         parent.wait(10.0)
         deadline = time.monotonic() + 20.0
