@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agents import persist
-from agents.merger import MergeJob, MergeLostError, MergeProcess, merge_step
+from agents.merger import Merged, MergeJob, MergeLostError, MergeProcess, merge_step
 from agents.replay import Replayed, ReplayPool
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
@@ -171,8 +171,7 @@ class Coordinator:
         self.cfg = cfg
         self.pool = pool
         self.merger: MergeProcess | None = None  # merging on a process (``use_merger``)
-        self._in_merge: tuple[dict, set] | None = None  # the job's robots' cells, rebuilds
-        self._merge_sent_s = 0.0  # when the merge process's job was sent (perf_counter)
+        self._in_merge: tuple[set, MergeJob] | None = None  # the job on its way, its robots
         self._fresh = False  # a merge came in since the last plan
         self._facts: tuple | None = None  # (merged map version, its frontier facts)
         self.merge_lag_ms: list[float] = []  # wall time from sending a merge job to applying it
@@ -559,7 +558,8 @@ class Coordinator:
         if self._pending:
             t0, c0 = time.perf_counter(), time.thread_time()
             self.merged, delta = merge_step(self.merged, self.graph, self._merge_job())
-            self._index = None if delta is not None else self._index
+            if delta is not None:
+                self._index = None
             self.spent("merge", (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
         return None if self.merged.version == base else self.merged.delta_since(base)
 
@@ -599,37 +599,47 @@ class Coordinator:
         with self.timed("merge"):
             try:
                 got = self.merger.result(wait_s)
-            except MergeLostError as e:  # its cells go again, with the map as it is here
-                log.error("%s: merging its cells again", e)
-                self._requeue()
-                self.merger.reset(self.merged)
+            except MergeLostError as e:
+                self._merge_here(e)
                 got = None
             if got is not None:
-                self._in_merge = None
-                self.merger_cpu_ms.append(got.cpu_ms)
-                self.merge_lag_ms.append((time.perf_counter() - got.sent_s) * 1e3)
-                if got.delta is not None:
-                    self.merged = self.merged.apply_delta(got.delta)
-                    self.graph.apply(got.patch)
-                    self._index, self._facts = got.index, (self.merged.version, got.facts)
-                self._fresh = True
+                self._take_merge(got)
             due = send or self.now - self._last_flush >= MERGE_PERIOD_S
             if self._pending and not self.merger.busy and due:
-                self._in_merge = ({k: set(v) for k, v in self._pending.items()}, set(self._rebuild))
-                self.merger.submit(self._merge_job())
+                rids = set(self._pending)
+                self._in_merge = (rids, self._merge_job())
+                self.merger.submit(self._in_merge[1])
                 self._last_flush = self.now
                 if wait_s > 0:
                     self._merge_on_process(wait_s, send)
 
-    def _requeue(self) -> None:
-        """A lost merge job's cells are pending again."""
-        if self._in_merge is None:
+    def _take_merge(self, got: Merged) -> None:
+        """A merge process's result applied: the merged map, graph, matrix and facts."""
+        try:
+            merged = self.merged.apply_delta(got.delta) if got.delta is not None else None
+        except MapError as e:  # not the map it was sent: never seen, but never lost either
+            self._merge_here(e)
             return
-        pending, rebuild = self._in_merge
-        for rid, idxs in pending.items():
-            self._pending.setdefault(rid, set()).update(idxs)
-        self._rebuild |= rebuild
         self._in_merge = None
+        self.merger_cpu_ms.append(got.cpu_ms)
+        self.merge_lag_ms.append((time.perf_counter() - got.sent_s) * 1e3)
+        if merged is not None:
+            self.merged = merged
+            self.graph.apply(got.patch)
+            self._index, self._facts = got.index, (self.merged.version, got.facts)
+        self._fresh = True
+
+    def _merge_here(self, why: Exception) -> None:
+        """The job on its way merged on this thread (its result will not come, or does
+        not apply); the merge process starts again from the map here."""
+        log.error("merge process: %s; merging its job here", why)
+        if self._in_merge is not None:
+            self.merged, delta = merge_step(self.merged, self.graph, self._in_merge[1])
+            if delta is not None:
+                self._index = None
+            self._fresh = True
+        self._in_merge = None
+        self.merger.reset(self.merged)
 
     def use_merger(self, merger: MergeProcess) -> MergeProcess:
         """Merge on ``merger``'s process from now on (it is given the merged map)."""

@@ -140,7 +140,8 @@ def _serve(inbox, results, _state_dir) -> None:
 class MergeProcess:
     """One process merging robots' cells for the coordinator, one job at a time:
     ``submit`` a job, ``result()`` when it is done. A process that died is restarted
-    (``result`` raises ``MergeLostError``: give it the map and the job's cells again)."""
+    (``result`` raises ``MergeLostError``: the coordinator merges that job itself and
+    gives the process its map again)."""
 
     def __init__(self, merged: GridPolyMap, nav: NavConfig) -> None:
         self._ctx = mp.get_context("spawn")  # no fork of a process with Zenoh threads

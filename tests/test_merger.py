@@ -89,7 +89,7 @@ def test_a_merge_process_gives_the_map_graph_and_facts_of_a_merge_here():
         )
 
 
-def test_a_killed_merge_process_is_restarted_and_its_cells_merged_again():
+def test_a_killed_merge_process_is_restarted_and_its_job_merged_here():
     here, there, merger = coordinators()
     with merger:
         feed((here, there), 0, 2)
@@ -101,10 +101,19 @@ def test_a_killed_merge_process_is_restarted_and_its_cells_merged_again():
         here.flush()
         there.flush(send=True)  # within the merge period: sent only when asked to
         assert merger.busy
-        merged_there(there)  # notices, restarts it with the map here, sends the cells again
+        merged_there(there)  # notices, merges the job here, restarts it with the map
         assert merger.restarts == 1 and merger.pid != victim
         assert same(there.merged, here.merged)
         assert same_graph(there.graph, here.graph)
+        # the restarted process merges the next job
+        done = len(there.merger_cpu_ms)
+        more, _ = ops_of([shifted(r, 0.0) for r in RECTS] + [shifted(RECTS[0], 4.0)])
+        for c in (here, there):
+            c.on_robot_map("r1", more)
+        here.flush()
+        merged_there(there)
+        assert len(there.merger_cpu_ms) == done + 1
+        assert same(there.merged, here.merged) and same_graph(there.graph, here.graph)
 
 
 def test_a_graph_patch_brings_a_copy_to_the_updated_graph():
