@@ -252,7 +252,10 @@ class Coordinator:
             self.merged = merged
             self.graph = NavGraph.for_robot(merged, self.cfg.nav)
             self._index = None
-            if self.merger is not None:
+            if self.merger is not None:  # a job on its way is dropped: its robots go again
+                for rid in self._in_merge[0] if self._in_merge else ():
+                    self._pending.setdefault(rid, set()).update(self.robot(rid).map.cells)
+                self._in_merge = None
                 self.merger.reset(merged)
         for rid, pmap in robot_maps.items():
             self._set_map(self.robot(rid), pmap)

@@ -147,7 +147,8 @@ class MergeProcess:
         self._ctx = mp.get_context("spawn")  # no fork of a process with Zenoh threads
         self._nav = nav
         self._proc = start_process(self._ctx, _serve, None)
-        self.busy = self._drop = False
+        self.busy = False
+        self._stale = 0  # results of jobs sent before a reset, still to come: dropped
         self.restarts = 0
         self.reset(merged)
 
@@ -158,13 +159,13 @@ class MergeProcess:
     def reset(self, merged: GridPolyMap) -> None:
         """The merged map whole (a job in flight is forgotten: its result is dropped)."""
         self._send(("reset", merged, self._nav))
-        self._drop = self.busy
+        self._stale += self.busy
         self.busy = False
 
     def ready(self) -> bool:
         """Is a result (or news of the process's death) waiting?"""
         try:
-            return (self.busy or self._drop) and self._proc.results.poll()
+            return (self.busy or self._stale > 0) and self._proc.results.poll()
         except OSError:
             return True
 
@@ -182,12 +183,12 @@ class MergeProcess:
         process died or the job failed: the job is lost, the process restarted."""
         conn = self._proc.results
         try:
-            while self.busy or self._drop:
+            while self.busy or self._stale:
                 if not conn.poll(wait_s):
                     break
                 got = conn.recv()
-                if self._drop:  # the result of a job sent before the last reset
-                    self._drop = False
+                if self._stale:  # the result of a job sent before a reset (in order)
+                    self._stale -= 1
                     continue
                 self.busy = False
                 if got is None:
@@ -202,7 +203,7 @@ class MergeProcess:
         stop_process(self._proc, 0.0)
         self.restarts += 1
         self._proc = start_process(self._ctx, _serve, None)
-        self.busy = self._drop = False
+        self.busy, self._stale = False, 0
         raise MergeLostError(f"the merge process exited (code {code})")
 
     def close(self) -> None:

@@ -155,3 +155,30 @@ def test_a_cycle_plans_on_the_last_merge_while_the_next_is_on_its_way():
         there.cycle()
         assert len(there.cycle_ms) == 1  # planned, not put off
         merged_there(there)
+
+
+def test_results_of_jobs_sent_before_a_reset_are_dropped():
+    from agents.merger import MergeJob, merge_step
+    from polyswarm.polymap import GridPolyMap, cells_digest
+
+    here, _, merger = coordinators()
+    merger.close()
+    feed((here,), 0, 5)
+    e, nav = here.cfg.explore, here.cfg.nav
+    facts = (e.min_frontier_length_m, e.max_frontier_length_m, here.sensor)
+
+    def job(robots: list[str]) -> MergeJob:
+        cells = tuple(c for r in robots for c in here.robot(r).map.cells.values())
+        return MergeJob(cells, frozenset(), (), here._merge_options, facts)
+
+    with MergeProcess(GridPolyMap(2.0), nav) as m:
+        m.submit(job(["r1", "r2", "r3"]))
+        m.reset(GridPolyMap(2.0))  # twice while it is on its way (its result comes after)
+        m.reset(GridPolyMap(2.0))
+        m.submit(job(["r3"]))
+        got = None
+        for _ in range(300):
+            got = got or m.result(wait_s=0.1)
+        want = merge_step(GridPolyMap(2.0), NavGraph.for_robot(GridPolyMap(2.0), nav), job(["r3"]))
+        assert got.delta.version == want[1].version
+        assert cells_digest(got.delta.cells) == cells_digest(want[1].cells)
