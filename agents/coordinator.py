@@ -682,15 +682,19 @@ class Coordinator:
 
     # -- the cycle -------------------------------------------------------------------------
 
+    def _awaiting_merge(self) -> bool:
+        """A merge is on its way and no newer map than the last plan's is in: planning
+        waits for it, as it would for a merge on this thread."""
+        return self.merger is not None and self.merger.busy and not self._fresh
+
     def due(self) -> bool:
-        m = self.merger
-        if m is not None and m.busy and not m.ready() and not self._fresh:
-            return False  # planning waits for the merge on its way, as it would here
+        if self._awaiting_merge() and not self.merger.ready():
+            return False  # (a result that is in is taken by the cycle's flush)
         return self._wake or self.now - self._last_cycle >= self.cfg.explore.cycle_period_s
 
     def cycle(self) -> Outgoing:
         out = Outgoing(merged_delta=self.flush(send=True))
-        if self.merger is not None and self.merger.busy and not self._fresh:
+        if self._awaiting_merge():
             self._wake = True  # plan on the map the merge process is making
             return out
         self._fresh = False

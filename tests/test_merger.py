@@ -149,11 +149,17 @@ def test_a_cycle_plans_on_the_last_merge_while_the_next_is_on_its_way():
         feed((there,), 0, 2)
         merged_there(there)  # a merge is in, not planned on yet
         feed((there,), 2, 5)
-        there.flush(send=True)  # the next one on its way
-        assert merger.busy
-        assert there.due()
-        there.cycle()
-        assert len(there.cycle_ms) == 1  # planned, not put off
+        there.flush(send=True)  # the next one on its way...
+        os.kill(merger.pid, signal.SIGSTOP)  # ...and held there: no race with its result
+        try:
+            assert merger.busy and not merger.ready()
+            assert there.due()
+            there.cycle()
+            assert len(there.cycle_ms) == 1  # planned, not put off
+            there.now += 60.0
+            assert not there.due()  # nothing newer in since: the next plan waits for it
+        finally:
+            os.kill(merger.pid, signal.SIGCONT)
         merged_there(there)
 
 
