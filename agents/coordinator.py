@@ -543,7 +543,10 @@ class Coordinator:
     def _merge_due(self) -> bool:
         changed = self._pending or any(r.inflight for r in self.robots.values())
         busy = self.merger is not None and self.merger.busy
-        return bool(changed) and not busy and self.now - self._last_flush >= MERGE_PERIOD_S
+        return bool(changed) and not busy and self._merge_period_passed()
+
+    def _merge_period_passed(self) -> bool:
+        return self.now - self._last_flush >= MERGE_PERIOD_S
 
     def flush(self, wait_s: float = 0.0, send: bool = False) -> MapDelta | None:
         """Merge the robots' cells changed since the last flush; the merged map's delta.
@@ -607,8 +610,7 @@ class Coordinator:
                 got = None
             if got is not None:
                 self._take_merge(got)
-            due = send or self.now - self._last_flush >= MERGE_PERIOD_S
-            if self._pending and not self.merger.busy and due:
+            if self._pending and not self.merger.busy and (send or self._merge_period_passed()):
                 rids = set(self._pending)
                 self._in_merge = (rids, self._merge_job())
                 self.merger.submit(self._in_merge[1])
