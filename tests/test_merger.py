@@ -6,6 +6,8 @@ from __future__ import annotations
 import os
 import pickle
 import signal
+import subprocess
+import sys
 
 import numpy as np
 
@@ -188,3 +190,31 @@ def test_results_of_jobs_sent_before_a_reset_are_dropped():
         want = merge_step(GridPolyMap(2.0), NavGraph.for_robot(GridPolyMap(2.0), nav), job(["r3"]))
         assert got.delta.version == want[1].version
         assert cells_digest(got.delta.cells) == cells_digest(want[1].cells)
+
+
+def test_a_process_ending_with_its_merge_process_leaves_no_semaphore_behind(tmp_path):
+    """``exit_now`` skips the interpreter's teardown; the worker queues' semaphores must
+    still be released (else the resource tracker warns in every coordinator log). Run
+    as a script file, as the coordinator is (with ``-c`` the tracker did not warn)."""
+    script = tmp_path / "ends.py"
+    script.write_text(
+        "from agents.merger import MergeProcess\n"
+        "from polyswarm.cli import exit_now\n"
+        "from polyswarm.config import Config\n"
+        "from polyswarm.polymap import GridPolyMap\n"
+        "if __name__ == '__main__':\n"
+        "    MergeProcess(GridPolyMap(2.0), Config().nav).close()\n"
+        "    exit_now(0)\n"
+    )
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = {**os.environ, "PYTHONPATH": root}
+    done = subprocess.run(
+        [sys.executable, str(script)],
+        check=False,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "leaked semaphore" not in done.stderr

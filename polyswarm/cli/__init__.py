@@ -62,7 +62,15 @@ def exit_now(code: int = 0) -> NoReturn:
     """End a long-running process (agent, coordinator) once its work is saved and its
     Zenoh session closed, skipping the interpreter's teardown: its garbage collection
     over every map object outlasted `launch`'s shutdown grace on a loaded machine (ten
-    agents on two cores; faulthandler showed them killed while "Garbage-collecting")."""
+    agents on two cores; faulthandler showed them killed while "Garbage-collecting").
+
+    The multiprocessing finalisers that teardown would run are run here: without them
+    the queues' semaphores of the coordinator's worker processes stayed registered, and
+    the resource tracker warned of "leaked semaphore objects" in every coordinator log."""
+    from multiprocessing import util
+
+    with contextlib.suppress(Exception):
+        util._run_finalizers(0)  # what the interpreter's exit runs (priority >= 0)
     logging.shutdown()
     sys.stdout.flush()
     sys.stderr.flush()
