@@ -19,7 +19,13 @@ what the trimming must keep is the map's meaning, hence the zone (for a point ``
   mapped obstacle vector, and farther than ``reach`` from a mapped frontier vector (an
   obstacle beside a frontier turns it into a wall, so those are never dropped);
 * a dropped frontier vector, and a chord: ``p`` inside the explored space or within ``band`` of a
-  mapped obstacle or frontier vector.
+  mapped obstacle or frontier vector;
+* and between a dropped chain and its chord: no mapped obstacle or frontier vector
+  farther than ``band`` inside. The explored space has holes (a pillar the robot drove
+  round): a chain along a pillar's face and a chord behind it both lie in explored space,
+  and the chord would merge the pillar as explored (a TurtleBot3 in the office world lost
+  its corridor pillar and wall ends so; the map matcher then found walls in its clear
+  space and refused the right frame).
 
 ``band`` is ``BAND_SHARE`` of ``min_growth_m`` (0 when the option is off: only chains
 inside the explored space go), and only in cells the map has explored (the merge keeps
@@ -187,6 +193,7 @@ def _trim_ring(ring: Ring, zone: _Zone) -> Ring:
             if j > k + 1:
                 chords.append((k, j))
             k = j
+    chords = [c for c in chords if c not in _swallowing_chords(xy, chords, zone)]
     for _ in range(MAX_REPAIRS):
         kept = np.ones(n, bool)
         chord_ty = ty.copy()
@@ -200,6 +207,23 @@ def _trim_ring(ring: Ring, zone: _Zone) -> Ring:
     if kept.sum() < 3 or kept.all():
         return ring
     return Ring(xy[kept], chord_ty[kept])
+
+
+def _swallowing_chords(xy: np.ndarray, chords, zone: _Zone) -> set:
+    """The chords whose stretch (the chain they replace, closed by the chord) holds a
+    mapped obstacle or frontier vector deeper than the zone's band: unexplored space the
+    chord would merge as explored (they are undone)."""
+    if not chords:
+        return set()
+    n = len(xy)
+    stretch = [shapely.Polygon(xy[[m % n for m in range(k, j + 1)]]) for k, j in chords]
+    # a chain and its chord may cross: the stretch is then several pieces
+    inner = shapely.buffer(shapely.make_valid(stretch), -(zone.band + MIN_SAMPLE_M))
+    hit = np.zeros(len(chords), bool)
+    for lines in (zone.obstacles, zone.frontiers):
+        if lines is not None:
+            hit |= shapely.intersects(lines, inner)
+    return {c for c, h in zip(chords, hit, strict=True) if h}
 
 
 def _crossing_chords(xy: np.ndarray, kept: np.ndarray, chords) -> set:

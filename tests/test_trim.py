@@ -5,7 +5,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from polyswarm.polymap import GridPolyMap, MergeOptions, TypedPolygon, VectorType
+from polyswarm.polymap import GridPolyMap, MergeOptions, Ring, TypedPolygon, VectorType
 from polyswarm.trim import trim_keyframe
 
 O, F = VectorType.OBSTACLE, VectorType.FRONTIER
@@ -118,3 +118,32 @@ def test_trimmed_merge_explores_what_the_keyframe_explores(dx, dy, per_side, noi
     assert shapely.covers(b.buffer(OPTS.min_growth_m), a)
     assert shapely.covers(a.buffer(OPTS.min_growth_m), b)
     assert abs(a.area - b.area) <= 0.05 * OPTS.min_growth_m * a.length
+
+
+def _room_with_pillar() -> GridPolyMap:
+    """The 4 m x 3 m room with a 0.4 m square pillar at (2.2-2.6, 1.3-1.7), explored
+    all around it (the robot drove round it)."""
+    shell = Ring(np.array([[0, 0], [4, 0], [4, 3], [0, 3]], float), np.full(4, O))
+    pillar = Ring(np.array([[2.2, 1.3], [2.2, 1.7], [2.6, 1.7], [2.6, 1.3]]), np.full(4, O))
+    return GridPolyMap.from_polygons([TypedPolygon(shell, (pillar,))], cell_size=2.0)
+
+
+def test_a_chord_never_swallows_a_mapped_pillar():
+    # a keyframe from the left sees the pillar's left face and the shadow behind it;
+    # the shadow's chain lies in explored space and so does the chord across its mouth,
+    # but the pillar lies between them: trimmed to the chord, the merge would erase it
+    pmap = _room_with_pillar()
+    xy = [[0.5, 0.5], [1.2, 0.5], [2.0, 0.5], [3.0, 0.5], [3.0, 0.8], [3.0, 1.25]]
+    ty = [O, O, O, F, F, F]
+    xy += [[2.6, 1.28], [2.2, 1.28], [2.2, 1.5], [2.2, 1.72], [2.6, 1.72]]  # shadow, face
+    ty += [F, O, O, F, F]
+    xy += [[3.0, 1.75], [3.0, 2.2], [3.0, 2.5], [2.0, 2.5], [1.2, 2.5], [0.5, 2.5]]
+    ty += [F, F, O, O, O, O]
+    kf = TypedPolygon.from_points(np.array(xy), np.array(ty))
+    kf.validate()
+    out = trim_keyframe(kf, pmap, OPTS)
+    out.validate()
+    merged = _region(pmap.merge(out, OPTS).map)
+    assert not shapely.intersects(merged, shapely.box(2.25, 1.35, 2.55, 1.65))
+    # and the map is what merging the whole keyframe gives
+    assert abs(merged.area - _region(pmap.merge(kf, OPTS).map).area) < 1e-6
