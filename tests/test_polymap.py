@@ -26,7 +26,7 @@ from polyswarm.polymap import (
 )
 from polyswarm.polymap.borders import _across_changed_borders
 from polyswarm.polymap.partition import partition_of
-from polyswarm.polymap.vectortypes import _obstacle_mask, _segment_tree
+from polyswarm.polymap.vectortypes import _obstacle_mask, _segment_tree, fill_notches
 from tests.conftest import F, O, rect, star
 
 
@@ -650,3 +650,28 @@ def test_a_cell_emptied_by_a_correction_does_not_block_merges_beside_it():
     other = GridPolyMap(2.0).merge(rect(2.2, 0.2, 4.0, 1.8, (O, F, O, O))).map
     merged = pmap.merge_cells([other.cells[(1, 0)]]).map
     assert merged.cells[(1, 0)].area == pytest.approx(1.8 * 1.6)
+
+
+def test_filling_notches_never_turns_a_thin_hole_inside_out():
+    # a sliver of wall 12 cm long and under 1 cm thick, an island in explored space
+    # (keyframes saw round it): its notches are shallower than 1 cm, and removing
+    # every other one left three vertices running counter-clockwise, a cell no decoder
+    # takes back (an agent's journal stopped replaying there)
+    sliver = [
+        [1.1095, 1.0591],
+        [1.0976, 1.0449],
+        [1.0875, 1.0465],
+        [1.0728, 1.0308],
+        [1.0652, 1.0369],
+        [1.0324, 1.0102],
+        [1.0049, 1.0062],
+        [1.002, 1.0062],
+    ]
+    shell = Ring(np.array([[0, 0], [2, 0], [2, 2], [0, 2]], float), np.full(4, O))
+    hole = Ring(np.array(sliver), np.full(len(sliver), O))
+    assert hole.signed_area < 0
+    pmap = GridPolyMap.from_polygons([TypedPolygon(shell, (hole,))], cell_size=2.0)
+    for cell in pmap.cells.values():
+        for p in fill_notches(cell, 0.01).polygons:
+            p.validate()
+            assert all(h.signed_area < 0 for h in p.holes)
