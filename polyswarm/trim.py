@@ -193,7 +193,8 @@ def _trim_ring(ring: Ring, zone: _Zone) -> Ring:
             if j > k + 1:
                 chords.append((k, j))
             k = j
-    chords = [c for c in chords if c not in _swallowing_chords(xy, chords, zone)]
+    swallowing = _swallowing_chords(xy, chords, zone)
+    chords = [c for c in chords if c not in swallowing]
     for _ in range(MAX_REPAIRS):
         kept = np.ones(n, bool)
         chord_ty = ty.copy()
@@ -211,8 +212,8 @@ def _trim_ring(ring: Ring, zone: _Zone) -> Ring:
 
 def _swallowing_chords(xy: np.ndarray, chords, zone: _Zone) -> set:
     """The chords whose stretch (the chain they replace, closed by the chord) holds a
-    mapped obstacle or frontier vector deeper than the zone's band: unexplored space the
-    chord would merge as explored (they are undone)."""
+    mapped obstacle or frontier vector deeper than the zone's band plus 1 cm: unexplored
+    space the chord would merge as explored (they are undone)."""
     if not chords:
         return set()
     n = len(xy)
