@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -232,3 +233,16 @@ def test_parts_of_a_symmetric_ring_corridor_are_not_merged():
     m = match_maps(a, transform_map(b, (3.0, 1.0, 0.7)))
     assert not m.accepted
     assert "ambiguous" in m.reason, m.summary()
+
+
+def test_the_peer_method_with_too_few_features_finds_no_frame():
+    """Two TurtleBot3 maps after 5 s (tests/fixtures): ORB finds one keypoint in each,
+    and OpenCV's matcher, asked for two neighbours, threw and ended `bench merge`."""
+    from polyswarm.benchmarks.gridmerge import Features, match_grids
+    from protocols.files import read_polymap
+
+    fixtures = Path(__file__).parent / "fixtures"
+    a = read_polymap(fixtures / "tb3_first_5s_r1.polymap")
+    b = read_polymap(fixtures / "tb3_first_5s_r2.polymap")
+    g = match_grids(a, b, Features.ORB)
+    assert g.pose is None and g.confidence == 0.0

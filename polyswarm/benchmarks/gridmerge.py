@@ -28,6 +28,9 @@ GRID_RESOLUTION_M = 0.05  # the occupancy grids the peer method merges
 UNKNOWN, FREE, OCCUPIED = 255, 0, 100  # int8 -1 / 0 / 100 read as uint8
 MATCH_CONFIDENCE = 0.3  # AffineBestOf2NearestMatcher's default
 MIN_MATCHES = 6  # its num_matches_thresh1 default
+# the matcher asks each keypoint for its 2 nearest neighbours (the ratio test): an image
+# with fewer keypoints makes OpenCV throw (a TurtleBot3's first 5 s of map had one each)
+MIN_KEYPOINTS = 2
 DEFAULT_THRESHOLD = 1.0  # map_merge's estimation_confidence default
 
 
@@ -78,6 +81,8 @@ def match_grids(a: GridPolyMap, b: GridPolyMap, features: Features = Features.AK
         f = cv2.detail.computeImageFeatures2(finder, img)
         f.img_idx = k
         feats.append(f)
+    if min(len(f.keypoints) for f in feats) < MIN_KEYPOINTS:
+        return GridMatch(None, 0.0, 0.0)  # nothing to match (OpenCV's matcher would throw)
     matcher = cv2.detail.AffineBestOf2NearestMatcher(False, False, MATCH_CONFIDENCE, MIN_MATCHES)
     pairwise = matcher.apply2(feats)
     matcher.collectGarbage()
