@@ -400,11 +400,15 @@ def fill_notches(cell: Cell, depth_m: float) -> Cell:
                     break
                 xy, ty = xy[~cand], ty[~cand]
                 keep_all = False
-            if keep_all or not _same_turn(ring, xy):
-                rings.append(ring)
-            else:
-                rings.append(Ring(xy, ty))
-                changed = True
+            filled = ring if keep_all else Ring(xy, ty)
+            # a hole thinner than depth_m (a sliver of wall the keyframes saw round) can
+            # be left with three vertices running the other way: free space on its
+            # right, which every decoder refuses (an agent's journal stopped replaying
+            # at such a cell, and with it every later delta); such a ring stays as it was
+            if filled.signed_area * ring.signed_area <= 0:
+                filled = ring
+            changed |= filled is not ring
+            rings.append(filled)
         polys.append(TypedPolygon(rings[0], tuple(rings[1:])))
     if not changed:
         return cell
@@ -412,17 +416,6 @@ def fill_notches(cell: Cell, depth_m: float) -> Cell:
     if not out.region.is_valid or out.area < cell.area - 1e-12:
         return cell  # a removal crossed another part of the outline: keep the teeth
     return out
-
-
-def _same_turn(ring: Ring, xy: np.ndarray) -> bool:
-    """Does ``xy`` still run the way ``ring`` does? Filling the notches of a hole
-    thinner than ``depth_m`` (a sliver of wall between two keyframes) can leave three
-    vertices that run the other way: a hole with free space on its right, which every
-    decoder refuses (a TurtleBot4's journal stopped replaying at such a cell, and with
-    it every later delta)."""
-    x, y = xy[:, 0], xy[:, 1]
-    area = 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
-    return area * ring.signed_area > 0
 
 
 def _drop_thin_growth(
