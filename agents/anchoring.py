@@ -27,16 +27,25 @@ Until the coordinator knows where that frame lies in the shared map frame:
   by it; its map follows as a correction of every keyframe, which its solo coordinator
   replays like any other;
 * its first pose that names the anchor hands it over: the main coordinator takes its
-  map copy (now in the shared frame), merges it, and coordinates it with the others.
+  map copy (now in the shared frame), merges it, and coordinates it with the others;
+* from then on its frame is audited every ``AUDIT_PERIOD_S``: the sightings made since
+  the hand-over, at the frame it is in. ``UNDO_CONTRADICTIONS`` moments where one robot
+  looked where another's pose put it and saw nothing undo the merge: its map leaves
+  the merged map (``Coordinator.withdraw``; nothing is lost, the robot keeps it), it is
+  sent an ``own`` anchor (the shared frame withdrawn: its coordinates are a frame of its
+  own again) and waits, explores and is matched as before. Its sightings are kept:
+  they rule the withdrawn frame out of the next matches.
 
-A robot anchored wrongly is not undone here yet: the frame is committed only on
-agreeing evidence (``FrameEstimate``), and ``polyswarm bench merge`` counts wrong merges.
+``POLYSWARM_WRONG_ANCHOR=r2:dx,dy,deg`` (``polyswarm launch --wrong-anchor``) commits
+robot r2's first frame that far off (metres, metres, degrees, in the frame's own axes):
+a fault injection that shows a wrong merge undone.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -45,7 +54,7 @@ import numpy as np
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
 from polyswarm.mapmatch import FrameEstimate, MapMatch, MatchError, match_maps
-from polyswarm.se2 import inverse, transform_points
+from polyswarm.se2 import compose, inverse, transform_points
 from polyswarm.sighting import (
     MIN_CONTRADICTIONS,
     Room,
@@ -63,6 +72,26 @@ MATCH_PERIOD_S = 5.0  # simulated (or sensor) seconds between matches of one rob
 MIN_MAP_M2 = 10.0  # a map smaller than this (either one) is not matched yet
 RESEND_S = 5.0  # an anchor the robot's poses do not name yet is sent again after this
 SOLO_ID_OFFSET = 97_000_000  # solo coordinators' target ids start this far apart
+AUDIT_PERIOD_S = 10.0  # simulated seconds between audits of one merged robot's frame
+# moments since the hand-over that contradict a merged robot's frame before the merge is
+# undone: twice what leaves a candidate frame out (a frame the robots saw each other at
+# in three places is withdrawn on clearer evidence than a candidate is passed over on)
+UNDO_CONTRADICTIONS = 2 * MIN_CONTRADICTIONS
+WRONG_ANCHOR_ENV = "POLYSWARM_WRONG_ANCHOR"
+
+
+def wrong_anchor_fault(text: str) -> tuple[str, np.ndarray] | None:
+    """``r2:dx,dy,deg`` -> ("r2", offset (m, m, rad)); "" -> None."""
+    if not text:
+        return None
+    try:
+        rid, rest = text.split(":", 1)
+        dx, dy, deg = (float(v) for v in rest.split(","))
+    except ValueError:
+        raise PolyswarmError(f"wrong anchor {text!r}: expected ROBOT:dx,dy,deg") from None
+    if not all(math.isfinite(v) for v in (dx, dy, deg)):
+        raise PolyswarmError(f"wrong anchor {text!r}: not finite")
+    return rid, np.array([dx, dy, math.radians(deg)])
 
 
 @dataclass
@@ -76,26 +105,51 @@ class _Waiting:
     matches: int = 0
     anchor: Anchor | None = None  # sent, not yet named by the robot's poses
     anchor_sent_s: float = -math.inf
+    # the anchor its poses name while it waits: 0 (its start's frame), or the ``own``
+    # anchor that withdrew its frame; ``release``: that anchor, until its poses name it
+    frame: int = 0
+    release: Anchor | None = None
+    epoch: int = 0  # its map copy's replay epoch in the main coordinator, before it left
+
+
+@dataclass
+class _Audit:
+    """A merged robot whose frame this coordinator found: checked on later sightings."""
+
+    frame: int  # the anchor its poses name
+    since_s: float  # handed over then: sightings since are the audit's evidence
+    last_s: float = -math.inf
+    running: Future | None = None
+    contradicted: int = 0  # the latest audit's count
 
 
 class Anchoring:
     """The robots of the swarm whose frames are not known yet (see the module)."""
 
     def __init__(self, cfg: Config, unknown: list[str]) -> None:
-        from agents.coordinator import Coordinator
-
         self.cfg = cfg
         self.waiting = {}
-        for k, rid in enumerate(unknown):
-            solo = Coordinator(cfg, {rid: (0.0, 0.0, 0.0)})
-            # target ids of its own: the main coordinator's must not repeat one it reached
-            solo._next_id = (solo._next_id + SOLO_ID_OFFSET * (k + 1)) % 1_000_000_000
-            self.waiting[rid] = _Waiting(solo)
+        self._solos = 0  # solo coordinators made (their target ids must differ)
+        for rid in unknown:
+            self.waiting[rid] = _Waiting(self._solo(rid, np.zeros(3)))
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="mapmatch") if unknown else None
         self.anchored: dict[str, np.ndarray] = {}  # robot -> its frame in the shared one
+        self.audits: dict[str, _Audit] = {}  # robots merged on a frame found here
+        self.undone = 0  # merges undone
+        self._fault = wrong_anchor_fault(os.environ.get(WRONG_ANCHOR_ENV, ""))
         # every robot's poses and clear profiles: in the shared frame, or, while it
         # waits, in its own
         self.tracks: dict[str, Track] = {}
+
+    def _solo(self, rid: str, start: np.ndarray):
+        """A coordinator for ``rid`` alone, its start at ``start`` in its own frame."""
+        from agents.coordinator import Coordinator
+
+        solo = Coordinator(self.cfg, {rid: tuple(float(v) for v in start)})
+        # target ids of its own: the main coordinator's must not repeat one it reached
+        self._solos += 1
+        solo._next_id = (solo._next_id + SOLO_ID_OFFSET * self._solos) % 1_000_000_000
+        return solo
 
     def owner(self, rid: str, main):
         """The coordinator that takes this robot's messages now."""
@@ -112,12 +166,16 @@ class Anchoring:
     # -- each loop of the coordinator ---------------------------------------------------------
 
     def tick(self, main, now_s: float) -> list[tuple[str, Anchor]]:
-        """Start the matches that are due, take the finished ones; the anchors to send."""
-        out = []
+        """Start the matches and audits that are due, take the finished ones; the anchors
+        to send."""
+        out = self._audit(main, now_s)
         for rid, w in self.waiting.items():
             if w.matching is not None and w.matching.done():
                 self._took(rid, w, w.matching)
                 w.matching = None
+            if w.release is not None and now_s - w.anchor_sent_s >= RESEND_S:
+                w.anchor_sent_s = now_s  # the withdrawal, until its poses name it
+                out.append((rid, w.release))
             if w.anchor is not None:
                 if now_s - w.anchor_sent_s >= RESEND_S:
                     w.anchor_sent_s = now_s
@@ -125,8 +183,8 @@ class Anchoring:
                 continue
             if w.frames.pose is not None:  # committed: anchor it
                 w.solo.rendezvous = {}
-                x, y, th = (float(v) for v in w.frames.pose)
-                w.anchor, w.anchor_sent_s = Anchor(1, x, y, th), now_s
+                x, y, th = (float(v) for v in self._committed(rid, w.frames.pose))
+                w.anchor, w.anchor_sent_s = Anchor(w.frame + 1, x, y, th), now_s
                 log.info(
                     "robot %s anchored at (%.2f m, %.2f m, %.1f deg)", rid, x, y, math.degrees(th)
                 )
@@ -145,6 +203,83 @@ class Anchoring:
                 w.matching = self._pool.submit(_match, main.merged, own, contradicts, seen_at)
             self._rendezvous(rid, w, main)
         return out
+
+    def _committed(self, rid: str, pose: np.ndarray) -> np.ndarray:
+        """The frame sent for a committed ``pose``: the pose, or, for the robot of a
+        wrong-anchor fault injection, the first time, that far off."""
+        if self._fault is None or self._fault[0] != rid:
+            return pose
+        off, self._fault = self._fault[1], None
+        log.warning("fault injection: %s anchored %s off its committed frame", rid, off)
+        return compose(pose, off)
+
+    # -- merged robots' frames, audited ---------------------------------------------------
+
+    def _audit(self, main, now_s: float) -> list[tuple[str, Anchor]]:
+        """Take finished audits (undoing a merge the sightings contradict); start due ones."""
+        out = []
+        for rid, a in list(self.audits.items()):
+            if a.running is not None and a.running.done():
+                try:
+                    a.contradicted = a.running.result()
+                except Exception:  # a failed audit must not stop the coordinator: retried
+                    log.exception("auditing the frame of %s failed", rid)
+                a.running = None
+                if a.contradicted >= UNDO_CONTRADICTIONS and rid in main.robots:
+                    out.append((rid, self._undo(rid, main, now_s)))
+                    continue
+            if a.running is None and now_s - a.last_s >= AUDIT_PERIOD_S:
+                a.last_s = now_s
+                count = self._audit_evidence(rid, a, main)
+                if count is not None:
+                    a.running = self._pool.submit(count)
+        return out
+
+    def _audit_evidence(self, rid: str, a: _Audit, main):
+        """A function counting the moments since the hand-over where the robots'
+        sightings contradict ``rid``'s frame (None: nothing to count yet)."""
+        info = main.robots.get(rid)
+        mine = self.tracks.get(rid)
+        if info is None or info.map is None or mine is None:
+            return None
+        mine = mine.since(max(a.since_s, info.corrected_s))
+        theirs = [
+            self.tracks[o].since(max(a.since_s, other.corrected_s))
+            for o, other in main.robots.items()
+            if o != rid and o in self.tracks
+        ]
+        if not theirs or not len(mine):
+            return None
+        maps = (main.merged, info.map)
+
+        def count() -> int:
+            rooms = (Room(maps[0]), Room(maps[1]))
+            return sum(contradictions(t, mine, np.zeros(3), rooms) for t in theirs)
+
+        return count
+
+    def _undo(self, rid: str, main, now_s: float) -> Anchor:
+        """Take ``rid`` out of the merged map and back to waiting; the ``own`` anchor
+        that withdraws its frame."""
+        a = self.audits.pop(rid)
+        log.warning(
+            "robot %s: %d moments since its merge contradict its frame: merge undone",
+            rid,
+            a.contradicted,
+        )
+        info = main.withdraw(rid)
+        solo = self._solo(rid, info.start)  # its start, in the coordinates it speaks in
+        mine = solo.robots[rid]
+        mine.alive, mine.pose, mine.pose_t = info.alive, info.pose, info.pose_t
+        if info.map is not None:  # (an atlas only without a replay pool; else its next
+            solo.on_robot_map(rid, info.map, info.atlas)  # correction fetches the map)
+        release = Anchor(a.frame + 1, 0.0, 0.0, 0.0, own=True)
+        self.waiting[rid] = _Waiting(
+            solo, frame=release.frame, release=release, anchor_sent_s=now_s, epoch=info.epoch
+        )
+        self.anchored.pop(rid, None)
+        self.undone += 1
+        return release
 
     def _rendezvous(self, rid: str, w: _Waiting, main) -> None:
         """Send a waiting robot towards where its candidate frame puts the nearest
@@ -187,9 +322,10 @@ class Anchoring:
 
     def sighted(self, rid: str, stamp_s: float, pose: Pose) -> None:
         """A robot's pose, and its scan's clear profile if sent, for the tracks."""
-        if not self.waiting:
+        if not self.waiting and not self.audits:
             return  # every frame is known: no evidence is needed
-        if rid in self.waiting and pose.frame != 0:
+        w = self.waiting.get(rid)
+        if w is not None and not (w.frame - (w.frame > 0) <= pose.frame <= w.frame):
             return  # anchored, not yet handed over: between two frames
         track = self.tracks.setdefault(rid, Track())
         track.add(Sighting(stamp_s, (pose.x, pose.y, pose.theta), pose.clear))
@@ -229,7 +365,11 @@ class Anchoring:
         map has caught up (the anchor's correction replayed: the copy is in the shared
         frame). True when it was handed over now."""
         w = self.waiting.get(rid)
-        if w is None or frame == 0 or (w.anchor is not None and frame < w.anchor.frame):
+        if w is None:
+            return False
+        if w.release is not None and frame >= w.release.frame:
+            w.release = None  # its frame is its own now: the withdrawal is not sent again
+        if frame <= w.frame or (w.anchor is not None and frame < w.anchor.frame):
             return False
         copy = w.solo.robots[rid].map
         if copy is None or copy.version < map_version:
@@ -243,12 +383,14 @@ class Anchoring:
             self.tracks.pop(rid, None)  # poses in a frame not known here either
         else:
             pose = np.array([w.anchor.x, w.anchor.y, w.anchor.theta])
+            self.audits[rid] = _Audit(w.anchor.frame, since_s=main.now)
         self.anchored[rid] = pose
         if rid in self.tracks:  # its poses so far, in the shared frame
             self.tracks[rid] = self.tracks[rid].moved(pose)
         solo = w.solo.robots[rid]
-        info = main.robots[rid] = RobotInfo(rid, pose.copy())  # its start: its frame's origin
+        info = main.robots[rid] = RobotInfo(rid, compose(pose, solo.start))  # its start
         info.alive = solo.alive
+        info.epoch = w.epoch + 1  # results of its earlier stay in the merged map are stale
         if solo.map is not None:  # in the shared frame now: the anchor's correction moved it
             main.on_robot_map(rid, solo.map, solo.atlas)
         log.info("robot %s joins the swarm's map (%d matches)", rid, w.matches)

@@ -481,11 +481,14 @@ class Coordinator:
         with self.timed("collect"):
             done, lost = self.pool.poll(wait_s)
             for r in done:
+                if r.rid not in self.robots:  # withdrawn (``withdraw``) since it was sent
+                    continue
                 got = self._collected(r)
                 if got is not None:
                     out.append((r.rid, got))
             for rid in lost:
-                self._set_map(self.robot(rid), self.robot(rid).map)
+                if rid in self.robots:
+                    self._set_map(self.robots[rid], self.robots[rid].map)
         return out
 
     def _collected(self, r: Replayed) -> MapDelta | MapError | None:
@@ -548,13 +551,27 @@ class Coordinator:
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(pmap.cells)
 
+    def withdraw(self, rid: str) -> RobotInfo:
+        """A robot leaves the swarm's map and plan (its frame was found wrong,
+        ``agents.anchoring``): the merged cells its copy reached are merged afresh from
+        the other robots' copies at the next flush, its target is free. Its copy, pose
+        and state are returned: nothing it mapped is lost, it goes on in a frame of its
+        own."""
+        info = self.robots.pop(rid)
+        self._pending.pop(rid, None)
+        if info.map is not None:
+            self._rebuild |= set(info.map.cells)
+        self._wake = True
+        log.warning("robot %s withdrawn from the merged map", rid)
+        return info
+
     def flush_due(self) -> bool:
         if self.merger is not None and self.merger.ready():
             return True  # a merge came in: publish it
         return self._merge_due()
 
     def _merge_due(self) -> bool:
-        changed = self._pending or any(r.inflight for r in self.robots.values())
+        changed = self._pending or self._rebuild or any(r.inflight for r in self.robots.values())
         busy = self.merger is not None and self.merger.busy
         return bool(changed) and not busy and self._merge_period_passed()
 
@@ -574,7 +591,7 @@ class Coordinator:
             self._merge_on_process(wait_s, send or wait_s > 0)
             return None if self.merged.version == base else self.merged.delta_since(base)
         self._last_flush = self.now
-        if self._pending:
+        if self._pending or self._rebuild:
             t0, c0 = time.perf_counter(), time.thread_time()
             self.merged, delta = merge_step(self.merged, self.graph, self._merge_job())
             if delta is not None:
@@ -623,7 +640,8 @@ class Coordinator:
                 got = None
             if got is not None:
                 self._take_merge(got)
-            if self._pending and not self.merger.busy and (send or self._merge_period_passed()):
+            due = self._pending or self._rebuild
+            if due and not self.merger.busy and (send or self._merge_period_passed()):
                 rids = set(self._pending)
                 self._in_merge = (rids, self._merge_job())
                 self.merger.submit(self._in_merge[1])

@@ -85,16 +85,26 @@ class SavedAgent(NamedTuple):
     odom: np.ndarray | None
     frame: int = 0
     scale: OdometryScale | None = None
+    own_frame: bool = False  # that anchor withdrew the shared frame (``Anchor.own``)
 
 
 def _write_meta(
-    meta_path: Path, robot_id: str, pose, version: int, odom=None, frame: int = 0, scale=None
+    meta_path: Path,
+    robot_id: str,
+    pose,
+    version: int,
+    odom=None,
+    frame: int = 0,
+    scale=None,
+    own_frame: bool = False,
 ) -> None:
     meta = {"robot": robot_id, "pose": [float(v) for v in pose], "map_version": version}
     if odom is not None:
         meta["odom"] = [float(v) for v in odom]
     if frame:
         meta["frame"] = int(frame)
+    if own_frame:
+        meta["own_frame"] = True
     if scale is not None:
         meta["odometry_scale"] = scale.state()
     _atomic_write(meta_path, json.dumps(meta).encode())
@@ -108,6 +118,7 @@ def save_agent(
     odom=None,
     frame: int = 0,
     scale: OdometryScale | None = None,
+    own_frame: bool = False,
 ) -> None:
     """A snapshot of the whole map and the pose; the journal starts empty again.
 
@@ -117,16 +128,23 @@ def save_agent(
     the odometry's distance scale SLAM learnt (a restarted agent keeps it)."""
     map_path, meta_path, journal = agent_paths(state_dir, robot_id)
     save_map(map_path, pmap)
-    _write_meta(meta_path, robot_id, pose, pmap.version, odom, frame, scale)
+    _write_meta(meta_path, robot_id, pose, pmap.version, odom, frame, scale, own_frame)
     journal.unlink(missing_ok=True)
 
 
 def save_pose(
-    state_dir: str | Path, robot_id: str, pose, version: int, odom=None, frame=0, scale=None
+    state_dir: str | Path,
+    robot_id: str,
+    pose,
+    version: int,
+    odom=None,
+    frame=0,
+    scale=None,
+    own_frame: bool = False,
 ) -> None:
     """The last pose only (shutdown: the map is already on disk, snapshot plus journal)."""
     meta_path = agent_paths(state_dir, robot_id)[1]
-    _write_meta(meta_path, robot_id, pose, version, odom, frame, scale)
+    _write_meta(meta_path, robot_id, pose, version, odom, frame, scale, own_frame)
 
 
 def _append(journal: Path, delta_bytes: bytes) -> None:
@@ -147,11 +165,12 @@ def journal_delta(
     odom=None,
     frame=0,
     scale=None,
+    own_frame: bool = False,
 ) -> None:
     """Append one encoded delta of the agent's map to its journal, and its pose."""
     _, meta_path, journal = agent_paths(state_dir, robot_id)
     _append(journal, delta_bytes)
-    _write_meta(meta_path, robot_id, pose, version, odom, frame, scale)
+    _write_meta(meta_path, robot_id, pose, version, odom, frame, scale, own_frame)
 
 
 def _replay_journal(journal: Path, pmap: GridPolyMap) -> GridPolyMap:
@@ -196,10 +215,13 @@ def load_agent(state_dir: str | Path, robot_id: str) -> SavedAgent | None:
         frame = meta.get("frame", 0)
         if not isinstance(frame, int) or isinstance(frame, bool) or frame < 0:
             raise ValueError(f"bad frame {frame!r}")
+        own_frame = meta.get("own_frame", False)
+        if not isinstance(own_frame, bool):
+            raise ValueError(f"bad own_frame {own_frame!r}")
     except (ValueError, KeyError, TypeError, OSError) as e:
         _set_aside(meta_path, e)
         return None
-    return SavedAgent(pmap, pose, odom, frame, _scale(meta, meta_path))
+    return SavedAgent(pmap, pose, odom, frame, _scale(meta, meta_path), own_frame)
 
 
 def _scale(meta: dict, meta_path: Path) -> OdometryScale | None:

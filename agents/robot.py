@@ -125,10 +125,11 @@ class RobotAgent:
         self.start_pose = np.array(start_pose, dtype=float)
         self.frame_known = frame_known
         self.frame = 0  # the last anchor applied
+        # that anchor withdrew the frame before it (``Anchor.own``): a frame of its own again
+        self.own_frame = False
         self._anchor: Anchor | None = None  # the anchor SLAM applies at the next scan
         # robots whose starts nobody gave: their poses mean nothing here until anchored
         self._own_frames = {rid for rid, st in known_starts(cfg.robots).items() if st is None}
-        self._anchored_peers: set[str] = set()  # of those, the ones whose poses name an anchor
         # send clear profiles (None: while a robot is in a frame of its own; benchmarks
         # that know every start but measure the matching set it True)
         self.sightings: bool | None = None
@@ -191,14 +192,18 @@ class RobotAgent:
             self.stats.distance_m += float(np.hypot(*(pose[:2] - self._last_odom_xy)))
         self._last_odom_xy = pose[:2]
 
-    def resume(self, pmap: GridPolyMap, pose, odom=None, frame: int = 0, scale=None) -> None:
+    def resume(
+        self, pmap: GridPolyMap, pose, odom=None, frame: int = 0, scale=None, own_frame=False
+    ) -> None:
         """Continue from a persisted map and pose (the agent was restarted); ``odom``, the
         odometry reading at that pose, lets SLAM follow the robot's motion since;
-        ``frame``, the last anchor applied (the map is in the shared frame since);
-        ``scale``, the odometry's distance scale SLAM had learnt."""
+        ``frame``, the last anchor applied (the map is in the shared frame since, unless
+        ``own_frame``: that anchor withdrew it); ``scale``, the odometry's distance scale
+        SLAM had learnt."""
         self.slam.resume(pmap, pose, odom, scale)
         self.pose = np.array(pose, dtype=float)
-        self.frame = max(self.frame, frame)
+        if frame >= self.frame:
+            self.frame, self.own_frame = frame, own_frame
 
     @property
     def latest_odom_s(self) -> float:
@@ -213,12 +218,17 @@ class RobotAgent:
 
     @property
     def in_shared_frame(self) -> bool:
-        return self.frame_known or self.frame > 0
+        return (self.frame_known or self.frame > 0) and not self.own_frame
 
     def on_anchor(self, a: Anchor) -> None:
         """The coordinator found where this robot's frame lies in the shared one: SLAM
-        moves there at the next scan (an anchor already applied is ignored)."""
+        moves there at the next scan (an anchor already applied is ignored). An ``own``
+        anchor withdraws the frame anchored so far: nothing moves, the robot's
+        coordinates are a frame of its own again."""
         if a.frame <= max(self.frame, self._anchor.frame if self._anchor else 0):
+            return
+        if a.own:
+            self._withdrawn(a)
             return
         log.info("%s: anchor %d: moving into the shared frame", self.id, a.frame)
         self._anchor = a
@@ -228,7 +238,7 @@ class RobotAgent:
         """SLAM moved into the anchor's frame in this step: so do the start, goals, peers."""
         a, self._anchor = self._anchor, None
         frame = np.array([a.x, a.y, a.theta])
-        self.frame = a.frame
+        self.frame, self.own_frame = a.frame, False
         self.start_pose = compose(frame, self.start_pose)
         self.behaviour.on_assignment(Assignment(AssignmentKind.STOP, -1), now_s, self.pose)
         self.behaviour.move_frame(frame)
@@ -236,6 +246,16 @@ class RobotAgent:
         self.peers.clear()
         self.merged = self.merged_graph = None  # the merged map is fetched afresh
         log.info("%s: in the shared frame (anchor %d), at %s", self.id, a.frame, self.pose)
+
+    def _withdrawn(self, a: Anchor) -> None:
+        """The frame anchored so far was found wrong: map, pose and start stay where they
+        are, in what is a frame of its own again; goals, the merged map and peers'
+        poses (all in the shared frame) are dropped."""
+        log.warning("%s: anchor %d: the shared frame is withdrawn", self.id, a.frame)
+        self.frame, self.own_frame = a.frame, True
+        self.behaviour.on_assignment(Assignment(AssignmentKind.STOP, -1), self._now_s, self.pose)
+        self.peers.clear()
+        self.merged = self.merged_graph = None
 
     def on_merged_map(self, pmap: GridPolyMap) -> None:
         """A full merged map (first contact or resync)."""
@@ -254,8 +274,6 @@ class RobotAgent:
         self.merged_graph.update(self.merged, {c.index for c in delta.cells})
 
     def on_peer_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
-        if pose.frame:
-            self._anchored_peers.add(rid)
         if rid == self.id or not self.in_shared_frame:
             return
         if rid in self._own_frames and pose.frame == 0:
@@ -317,14 +335,12 @@ class RobotAgent:
         return out
 
     def _sighting_wanted(self) -> bool:
-        """Whether a robot of the swarm is still in a frame of its own: the coordinator
-        then wants the clear profiles that tell its frame's images apart."""
+        """Whether a robot of the swarm started in a frame of its own: the coordinator
+        then wants the clear profiles that tell its frame's images apart, and, once it
+        is merged, that audit its frame (``agents.anchoring``): 128 bytes a second."""
         if self.sightings is not None:
             return self.sightings
-        own = self._own_frames - self._anchored_peers
-        if self.in_shared_frame:
-            own.discard(self.id)
-        return bool(own)
+        return bool(self._own_frames)
 
     def _clear_profile(self, scan: LaserScan, returns: np.ndarray) -> bytes:
         """``polyswarm.sighting.clear_profile`` of this scan (``returns``: its de-skewed
@@ -630,6 +646,7 @@ def run_agent(
                     agent.slam.odom,
                     agent.frame,
                     agent.slam.odometry_scale,
+                    agent.own_frame,
                 )
     return agent
 
@@ -653,6 +670,7 @@ def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -
                 agent.slam.odom,
                 agent.frame,
                 agent.slam.odometry_scale,
+                agent.own_frame,
             )
             agent.journaled = 1
         else:
@@ -665,6 +683,7 @@ def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -
                 agent.slam.odom,
                 agent.frame,
                 agent.slam.odometry_scale,
+                agent.own_frame,
             )
             agent.journaled += 1
     _send(bus, me, agent, out, item.stamp_s, item.seq, sink, wire)

@@ -400,25 +400,39 @@ class Anchor(Message):
     the swarm's map frame, found by matching its map with the merged map. The robot
     moves its pose graph, keyframes and pose by it (its map follows as a correction)
     and from then on speaks in the swarm's frame. ``frame`` numbers the anchors sent to
-    this robot (from 1): one already applied is ignored, so it can be sent again."""
+    this robot (from 1): one already applied is ignored, so it can be sent again.
+
+    ``own``: the frame the robot was anchored to so far was found wrong (later
+    evidence contradicted it) and is withdrawn. The robot moves nothing (``x``, ``y``,
+    ``theta`` are 0): the coordinates it speaks in become a frame of its own again,
+    until the next anchor."""
 
     TYPE: ClassVar[str] = "anchor"
     frame: int
     x: float
     y: float
     theta: float
+    own: bool = False
 
     def body(self) -> dict:
-        return {"frame": self.frame, "x": self.x, "y": self.y, "th": self.theta}
+        b = {"frame": self.frame, "x": self.x, "y": self.y, "th": self.theta}
+        if self.own:
+            b["own"] = 1
+        return b
 
     @classmethod
     def from_body(cls, b: dict) -> Anchor:
-        return cls(
+        own = _int(b.get("own", 0), "own", 0, 1) == 1
+        a = cls(
             _int(b.get("frame"), "frame", 1),
             _num(b.get("x"), "x", -MAX_ANCHOR_M, MAX_ANCHOR_M),
             _num(b.get("y"), "y", -MAX_ANCHOR_M, MAX_ANCHOR_M),
             _num(b.get("th"), "th", -1e3, 1e3),
+            own,
         )
+        if own and (a.x, a.y, a.theta) != (0.0, 0.0, 0.0):
+            raise ProtocolError("field 'own': a withdrawn frame moves nothing (x, y, th 0)")
+        return a
 
 
 @dataclass(frozen=True)

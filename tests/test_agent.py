@@ -75,22 +75,31 @@ def test_close_returns_off_the_map_are_remembered_for_planning_but_not_a_peers()
     assert np.hypot(*(seen[:, None, :] - peer[None]).transpose(2, 0, 1)).min() > 0.5
 
 
-def test_poses_carry_the_scans_clear_profile_while_a_robot_is_in_a_frame_of_its_own():
+def _profiles_sent(cfg, anchor_at: int | None = None) -> list[tuple[int, bytes]]:
+    """3 s of scans at 10 Hz by r1; r2's poses name an anchor from scan ``anchor_at``."""
+    agent = RobotAgent("r1", cfg, (0.0, 0.0, 0.0))
+    sent = []
+    for k in range(30):
+        t = 0.1 * k
+        if k == anchor_at:  # r2's frame is found: its poses name the anchor
+            agent.on_peer_pose("r2", t, Pose(3.0, 0.0, 0.0, frame=1))
+        agent.on_odom(t, Odometry(0.0, 0.0, 0.0))
+        out = agent.on_scan(t, room_scan(t))
+        if out.pose is not None and out.pose.clear:
+            sent.append((k, out.pose.clear))
+    return sent
+
+
+def test_poses_carry_the_scans_clear_profile_when_a_robot_started_in_a_frame_of_its_own():
+    """Before r2's frame is found the profiles tell its frame's images apart; after, they
+    audit it (``agents.anchoring``): at 1 Hz all along. A swarm whose starts were all
+    given sends none."""
     from polyswarm.config import RobotEntry
     from polyswarm.sighting import SECTORS
 
     cfg = replace(Config(), robots=(RobotEntry("r1", (0.0, 0.0, 0.0)), RobotEntry("r2")))
-    agent = RobotAgent("r1", cfg, (0.0, 0.0, 0.0))
-    sent = []
-    for k in range(30):  # 3 s of scans at 10 Hz
-        t = 0.1 * k
-        if k == 15:  # r2's frame is found: its poses name the anchor
-            agent.on_peer_pose("r2", t, Pose(3.0, 0.0, 0.0, frame=1))
-        agent.on_odom(t, Odometry(0.0, 0.0, 0.0))
-        out = agent.on_scan(t, room_scan(t))
-        if out.pose is not None:
-            sent.append((k, out.pose.clear))
-    before = [c for k, c in sent if k < 15 and c]
+    sent = _profiles_sent(cfg, anchor_at=15)
+    before = [c for k, c in sent if k < 15]
     after = [c for k, c in sent if k >= 15]
     assert len(before) == 2 and all(len(c) == SECTORS for c in before)  # at 1 Hz
     # the room's walls are 5-7.1 m away; behind, the 270-degree lidar sees nothing
@@ -98,4 +107,43 @@ def test_poses_carry_the_scans_clear_profile_while_a_robot_is_in_a_frame_of_its_
     known = prof > 0
     assert known.sum() >= 0.7 * SECTORS
     assert np.all((prof[known] >= 4.8) & (prof[known] <= 7.1)), prof
-    assert after and all(c == b"" for c in after)  # no robot left to find
+    assert len(after) in (1, 2) and all(len(c) == SECTORS for c in after)
+    told = replace(cfg, robots=(RobotEntry("r1", (0.0, 0.0, 0.0)), RobotEntry("r2", (3, 0, 0))))
+    assert _profiles_sent(told) == []
+
+
+def test_a_withdrawn_frame_is_a_frame_of_its_own_until_the_next_anchor(tmp_path):
+    """An ``own`` anchor moves nothing; the robot stops planning on the merged map and
+    around peers' poses (both in the shared frame), says the anchor's number in its
+    poses, and a restart keeps it so. The next anchor moves it into the shared frame."""
+    from agents import persist
+    from polyswarm.config import RobotEntry
+    from protocols.messages import Anchor
+
+    cfg = replace(Config(), robots=(RobotEntry("r1"), RobotEntry("r2")))
+    agent = RobotAgent("r2", cfg, (0.0, 0.0, 0.0), frame_known=False)
+    agent.frame = 1  # anchored once
+    agent.on_odom(0.0, Odometry(0.0, 0.0, 0.0))
+    agent.on_scan(0.0, room_scan(0.0))
+    agent.on_merged_map(agent.slam.map)
+    assert agent.in_shared_frame and agent.merged is not None
+    pose, version = agent.pose.copy(), agent.slam.map.version
+    agent.on_anchor(Anchor(2, 0.0, 0.0, 0.0, own=True))
+    assert agent.frame == 2 and agent.own_frame and not agent.in_shared_frame
+    assert agent.merged is None and np.array_equal(agent.pose, pose)
+    agent.on_peer_pose("r1", 0.1, Pose(1.0, 0.0, 0.0, frame=0))
+    assert agent.peers == {}
+    agent.on_anchor(Anchor(2, 0.0, 0.0, 0.0, own=True))  # a resend: nothing
+    agent.on_odom(0.1, Odometry(0.0, 0.0, 0.0))
+    out = agent.on_scan(0.1, room_scan(0.1))
+    assert out.pose is None or out.pose.frame == 2
+    assert agent.slam.map.version == version  # nothing moved
+    persist.save_agent(tmp_path, "r2", agent.slam.map, agent.pose, frame=2, own_frame=True)
+    again = RobotAgent("r2", cfg, (0.0, 0.0, 0.0), frame_known=False)
+    again.resume(*persist.load_agent(tmp_path, "r2"))
+    assert again.frame == 2 and again.own_frame and not again.in_shared_frame
+    agent.on_anchor(Anchor(3, 1.0, 2.0, 0.5))
+    agent.on_odom(0.2, Odometry(0.0, 0.0, 0.0))
+    agent.on_scan(0.2, room_scan(0.2))
+    assert agent.frame == 3 and not agent.own_frame and agent.in_shared_frame
+    assert np.allclose(agent.pose, [1.0, 2.0, 0.5], atol=1e-6)

@@ -155,11 +155,11 @@ def test_agent_state_is_a_snapshot_plus_a_journal_of_deltas(tmp_path):
     persist.journal_delta(tmp_path, "r1", encode_delta(b.delta_since(a.version)), (3, 1, 0), 2)
     wire = encode_delta(c.delta_since(b.version))
     persist.journal_delta(tmp_path, "r1", wire, (6, 1, 0), 3, odom=(5.5, 0.2, 0.1), frame=1)
-    pmap, pose, odom, frame, scale = persist.load_agent(tmp_path, "r1")
+    pmap, pose, odom, frame, scale, own_frame = persist.load_agent(tmp_path, "r1")
     assert pmap.version == c.version and pmap.explored_area() == pytest.approx(c.explored_area())
     assert list(pose) == [6, 1, 0]
     assert list(odom) == [5.5, 0.2, 0.1]  # the base's reading there: motion since is followed
-    assert frame == 1  # anchored: a restarted agent stays in the shared frame
+    assert frame == 1 and not own_frame  # anchored: a restarted agent stays in the shared frame
     assert scale is None  # none saved: learnt again
     journal = tmp_path / "r1.journal"
     journal.write_bytes(journal.read_bytes()[:-5])  # a crash in the middle of the last write

@@ -249,6 +249,11 @@ def test_a_pose_names_its_frame_only_once_anchored():
         decode(encode(Anchor(0, 3.0, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)
     with pytest.raises(ProtocolError):  # not in the same building
         decode(encode(Anchor(1, 3.0e6, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)
+    assert "own" not in Anchor(1, 3.0, -4.0, 1.5).body()  # as older senders wrote it
+    _, w = decode(encode(Anchor(2, 0.0, 0.0, 0.0, own=True), "coordinator", 0, 0.0), Anchor)
+    assert w.own and w.frame == 2
+    with pytest.raises(ProtocolError):  # a withdrawal moves nothing
+        decode(encode(Anchor(2, 1.0, 0.0, 0.0, own=True), "coordinator", 0, 0.0), Anchor)
 
 
 def test_a_poses_clear_profile_travels_whole_or_is_refused():

@@ -103,6 +103,7 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         "profile": spec.profile,
         "start": spec.start,
         "anchors": m["anchors"],
+        "anchor_events": m.get("anchor_events", []),
         "unanchored": m["unanchored"],
         "t90_s": m["t90_s"],
         "t99_s": m["t99_s"],
@@ -261,6 +262,13 @@ def summarise_unknown(rows: list[dict]) -> dict:
                 "wrong": sum(
                     a["err_m"] > WRONG_FRAME_M or a["err_deg"] > WRONG_FRAME_DEG for a in errs
                 ),
+                # every frame sent, also those later withdrawn, and the withdrawals
+                "wrong_sent": sum(
+                    e["err_m"] > WRONG_FRAME_M or e["err_deg"] > WRONG_FRAME_DEG
+                    for e in r.get("anchor_events", [])
+                    if not e["own"]
+                ),
+                "undone": sum(e["own"] for e in r.get("anchor_events", [])),
             }
         )
     res = {}
@@ -272,6 +280,8 @@ def summarise_unknown(rows: list[dict]) -> dict:
             "success_rate": sum(x["success"] for x in runs) / len(runs),
             "all_anchored": all(not x["unanchored"] for x in runs),
             "wrong_merges": sum(x["wrong"] for x in runs),
+            "wrong_frames_sent": sum(x["wrong_sent"] for x in runs),
+            "merges_undone": sum(x["undone"] for x in runs),
             "frame_err_m_max": max((x["frame_err_m_max"] or 0.0 for x in runs), default=None),
             "frame_err_deg_max": max((x["frame_err_deg_max"] or 0.0 for x in runs), default=None),
             "t99_ratio_median": _median_or_none(ratios),

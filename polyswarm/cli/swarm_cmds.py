@@ -275,6 +275,12 @@ def launch_cmd(
         help="Lose, duplicate and reorder received messages at the coordinator and agents "
         "(probabilities), e.g. drop=0.1,dup=0.05,reorder=0.05.",
     ),
+    wrong_anchor: str = typer.Option(
+        "",
+        help="With --unknown-start, a fault injection: commit ROBOT's first frame DX metres, "
+        "DY metres and DEG degrees off (ROBOT:DX,DY,DEG, e.g. r2:2,1,20); its merge is undone "
+        "once the robots' sightings contradict it.",
+    ),
     restart: bool = typer.Option(
         True,
         help="Restart a process that exits unexpectedly, with backoff, as systemd would on a "
@@ -315,6 +321,9 @@ def launch_cmd(
     from agents.session import LinkFaults, stop_on_signals
 
     LinkFaults.parse(link_faults)  # a bad specification fails here, not in the children
+    from agents.anchoring import wrong_anchor_fault
+
+    wrong_anchor_fault(wrong_anchor)
     opts = LaunchOptions(
         world,
         robots,
@@ -329,6 +338,7 @@ def launch_cmd(
         load_cfg(config, profile),
         faults=Fault.parse_many(fault),
         link_faults=link_faults,
+        wrong_anchor=wrong_anchor,
         view_port=view_port,
         restart=restart,
         unknown_start=unknown_start,
@@ -392,6 +402,9 @@ def launch_cmd(
             f"{rid}'s frame found (simulated s, error)",
             f"{a['t_s']:.0f} s, {a['err_m']:.3f} m, {a['err_deg']:.2f} deg",
         )
+    undone = [e["robot"] for e in m.get("anchor_events", []) if e["own"]]
+    if undone:
+        table.add_row("merges undone (frames withdrawn)", ", ".join(undone))
     if m["unanchored"]:
         table.add_row("frames never found", ", ".join(m["unanchored"]))
     Console().print(table)

@@ -135,6 +135,7 @@ class LaunchOptions:
     verbose: bool = False
     faults: tuple[Fault, ...] = ()  # fault injection (tests of reliability)
     link_faults: str = ""  # message loss/duplication/reordering at coordinator and agents
+    wrong_anchor: str = ""  # ROBOT:dx,dy,deg: its first frame committed that far off (a fault)
     # niceness of the simulator and agent processes: on one computer they stand for the
     # robots' own computers, and ten of them must not starve the coordinator and router
     # (the fleet's shared machine); 0 runs everything at the same priority
@@ -210,6 +211,10 @@ class Observer:
         self.own_frames = {rid for rid, st in known_starts(cfg.robots).items() if st is None}
         self.true_starts = [np.asarray(p, dtype=float) for p in cfg.sim.start_poses]
         self.anchors: dict[str, dict] = {}  # robot -> when its frame was placed, how well
+        # every anchor sent (withdrawals, ``own``, among them), and per robot the last
+        # one's number and where its first frame lies in the coordinates it speaks now
+        self.anchor_events: list[dict] = []
+        self._frames: dict[str, tuple[int, np.ndarray]] = {}
         self.to_map = np.zeros(3)
         if cfg.sim.start_poses and any(r.start is None for r in cfg.robots):
             self.to_map = inverse(np.asarray(starts[0], dtype=float))
@@ -268,14 +273,24 @@ class Observer:
         self.merged = self.merged.apply_delta(delta)
 
     def on_anchor(self, rid: str, a: Anchor) -> None:
-        """The coordinator placed robot ``rid``'s frame: scored against where it really
-        started (the first anchor of each robot is kept; resends repeat it)."""
+        """The coordinator placed robot ``rid``'s frame (or withdrew it: ``own``): scored
+        against where it really started (resends repeat an anchor: counted once)."""
         k = next((i for i, r in enumerate(self.robots) if r == rid), None)
-        if k is None or rid in self.anchors or k >= len(self.true_starts):
+        last, first = self._frames.get(rid, (0, np.zeros(3)))
+        if k is None or a.frame <= last or k >= len(self.true_starts):
             return
-        truth = compose(self.to_map, self.true_starts[k])
-        err_m, err_rad = frame_error((a.x, a.y, a.theta), truth)
-        self.anchors[rid] = {"t_s": self.sim_t, "err_m": err_m, "err_deg": math.degrees(err_rad)}
+        event = {"robot": rid, "frame": a.frame, "t_s": self.sim_t, "own": a.own}
+        if a.own:  # withdrawn: its map left the merged map, its coordinates are its own
+            self.anchors.pop(rid, None)
+        else:
+            first = compose((a.x, a.y, a.theta), first)
+            truth = compose(self.to_map, self.true_starts[k])
+            err_m, err_rad = frame_error(first, truth)
+            place = {"t_s": self.sim_t, "err_m": err_m, "err_deg": math.degrees(err_rad)}
+            self.anchors[rid] = place
+            event |= place
+        self._frames[rid] = (a.frame, first)
+        self.anchor_events.append(event)
 
     def unplaced(self) -> list[str]:
         """Robots in frames of their own whose frames were not placed yet."""
@@ -386,6 +401,7 @@ class Observer:
             # and those never placed (their maps never joined the merged map)
             "anchors": self.anchors,
             "unanchored": self.unplaced(),
+            "anchor_events": self.anchor_events,  # every anchor and withdrawal, in order
             # resident memory of every process over the run (wall s, MB; an agent's row
             # also has its keyframes then, to tell memory that follows the map from a leak)
             "rss_mb_over_time": {
@@ -589,13 +605,14 @@ def launch(
         # a router of its own: the others keep talking while the coordinator restarts
         children.append(_spawn("router", ["router", "--listen", cfg.comms.endpoint], logs, False))
         faulty = {"POLYSWARM_LINK_FAULTS": opts.link_faults} if opts.link_faults else {}
+        wrong = {"POLYSWARM_WRONG_ANCHOR": opts.wrong_anchor} if opts.wrong_anchor else {}
         children.append(
             _spawn(
                 "coordinator",
                 ["coordinator", "--config", conf, "--connect", cfg.comms.endpoint],
                 logs,
                 opts.verbose,
-                faulty,
+                faulty | wrong,
             )
         )
         sim_args = [
