@@ -28,13 +28,16 @@ Until the coordinator knows where that frame lies in the shared map frame:
   replays like any other;
 * its first pose that names the anchor hands it over: the main coordinator takes its
   map copy (now in the shared frame), merges it, and coordinates it with the others;
-* from then on its frame is audited every ``AUDIT_PERIOD_S``: the sightings made since
-  the hand-over, at the frame it is in. ``UNDO_CONTRADICTIONS`` moments where one robot
-  looked where another's pose put it and saw nothing undo the merge: its map leaves
-  the merged map (``Coordinator.withdraw``; nothing is lost, the robot keeps it), it is
-  sent an ``own`` anchor (the shared frame withdrawn: its coordinates are a frame of its
-  own again) and waits, explores and is matched as before. Its sightings are kept:
-  they rule the withdrawn frame out of the next matches.
+* from then on its frame is audited every ``AUDIT_PERIOD_S`` on what came since the
+  hand-over: the sightings, and its map against the maps of the robots merged before
+  it (``polyswarm.mapmatch.fit_at``). ``UNDO_CONTRADICTIONS`` moments where one robot
+  looked where another's pose put it and saw nothing, or ``UNDO_AUDITS`` audits in a
+  row where ``UNDO_CONFLICT_SHARE`` of the walls the maps share stand in the other's
+  clear space, undo the merge: its map leaves the merged map
+  (``Coordinator.withdraw``; nothing is lost, the robot keeps it), it is sent an
+  ``own`` anchor (the shared frame withdrawn: its coordinates are a frame of its own
+  again) and waits, explores and is matched as before. Its sightings are kept: they
+  rule the withdrawn frame out of the next matches.
 
 ``POLYSWARM_WRONG_ANCHOR=r2:dx,dy,deg`` (``polyswarm launch --wrong-anchor``) commits
 robot r2's first frame that far off (metres, metres, degrees, in the frame's own axes):
@@ -53,7 +56,14 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
-from polyswarm.mapmatch import FrameEstimate, MapMatch, MatchError, match_maps
+from polyswarm.mapmatch import (
+    MIN_OVERLAP_M2,
+    FrameEstimate,
+    MapMatch,
+    MatchError,
+    fit_at,
+    match_maps,
+)
 from polyswarm.se2 import compose, inverse, transform_points
 from polyswarm.sighting import (
     MIN_CONTRADICTIONS,
@@ -77,6 +87,12 @@ AUDIT_PERIOD_S = 10.0  # simulated seconds between audits of one merged robot's 
 # undone: twice what leaves a candidate frame out (a frame the robots saw each other at
 # in three places is withdrawn on clearer evidence than a candidate is passed over on)
 UNDO_CONTRADICTIONS = 2 * MIN_CONTRADICTIONS
+# of the walls a merged robot's map shares with the maps merged before it, the share in
+# their clear space that undoes the merge, in UNDO_AUDITS audits in a row: right frames
+# conflict 0.1-0.2 % on the thesis sensor and 1-8 % on the TurtleBot3 (doubled walls,
+# docs/merge-log.md); a frame 2.2 m and 20 deg off, 62-69 % (office launch, seed 1)
+UNDO_CONFLICT_SHARE = 0.25
+UNDO_AUDITS = 2
 WRONG_ANCHOR_ENV = "POLYSWARM_WRONG_ANCHOR"
 
 
@@ -120,11 +136,13 @@ class _Audit:
     since_s: float  # handed over then: sightings since are the audit's evidence
     last_s: float = -math.inf
     running: Future | None = None
-    contradicted: int = 0  # the latest audit's count
+    contradicted: int = 0  # the latest audit's moments against the frame
+    conflicting: int = 0  # audits in a row whose maps conflicted
 
 
 class Anchoring:
-    """The robots of the swarm whose frames are not known yet (see the module)."""
+    """The robots of the swarm whose frames are not known yet, and the audits of those
+    whose frames were found here (see the module)."""
 
     def __init__(self, cfg: Config, unknown: list[str]) -> None:
         self.cfg = cfg
@@ -216,56 +234,87 @@ class Anchoring:
     # -- merged robots' frames, audited ---------------------------------------------------
 
     def _audit(self, main, now_s: float) -> list[tuple[str, Anchor]]:
-        """Take finished audits (undoing a merge the sightings contradict); start due ones."""
+        """Take finished audits (undoing a merge the evidence contradicts); start due ones."""
         out = []
         for rid, a in list(self.audits.items()):
             if a.running is not None and a.running.done():
                 try:
-                    a.contradicted = a.running.result()
+                    a.contradicted, share, overlap_m2 = a.running.result()
                 except Exception:  # a failed audit must not stop the coordinator: retried
                     log.exception("auditing the frame of %s failed", rid)
+                else:
+                    clash = share >= UNDO_CONFLICT_SHARE and overlap_m2 >= MIN_OVERLAP_M2
+                    a.conflicting = a.conflicting + 1 if clash else 0
+                    log.info(
+                        "frame of %s audited: %d moments against it; %.1f %% of the walls "
+                        "shared with earlier maps (%.0f m2) in their clear space",
+                        rid,
+                        a.contradicted,
+                        100 * share,
+                        overlap_m2,
+                    )
                 a.running = None
-                if a.contradicted >= UNDO_CONTRADICTIONS and rid in main.robots:
+                if a.contradicted >= UNDO_CONTRADICTIONS or a.conflicting >= UNDO_AUDITS:
                     out.append((rid, self._undo(rid, main, now_s)))
                     continue
             if a.running is None and now_s - a.last_s >= AUDIT_PERIOD_S:
                 a.last_s = now_s
-                count = self._audit_evidence(rid, a, main)
-                if count is not None:
-                    a.running = self._pool.submit(count)
+                audit = self._audit_evidence(rid, a, main)
+                if audit is not None:
+                    a.running = self._pool.submit(audit)
         return out
 
     def _audit_evidence(self, rid: str, a: _Audit, main):
-        """A function counting the moments since the hand-over where the robots'
-        sightings contradict ``rid``'s frame (None: nothing to count yet)."""
+        """A function measuring what came since ``rid``'s hand-over against its frame:
+        (moments the robots' sightings contradict it, the share of the walls its map
+        shares with the maps merged before it that stand in their clear space, the
+        explored area shared); None while its map is not in."""
         info = main.robots.get(rid)
-        mine = self.tracks.get(rid)
-        if info is None or info.map is None or mine is None:
+        if info is None or info.map is None:
             return None
-        mine = mine.since(max(a.since_s, info.corrected_s))
+        earlier = [
+            o
+            for o, other in main.robots.items()
+            if o != rid
+            and other.map is not None
+            and (o not in self.audits or self.audits[o].since_s < a.since_s)
+        ]
+        mine = self.tracks.get(rid)
+        if mine is not None:
+            mine = mine.since(max(a.since_s, info.corrected_s))
         theirs = [
             self.tracks[o].since(max(a.since_s, other.corrected_s))
             for o, other in main.robots.items()
             if o != rid and o in self.tracks
         ]
-        if not theirs or not len(mine):
-            return None
-        maps = (main.merged, info.map)
+        own, maps = info.map, [main.robots[o].map for o in earlier]
+        merged = main.merged
 
-        def count() -> int:
-            rooms = (Room(maps[0]), Room(maps[1]))
-            return sum(contradictions(t, mine, np.zeros(3), rooms) for t in theirs)
+        def audit() -> tuple[int, float, float]:
+            n = 0
+            if mine is not None and len(mine) and theirs:
+                rooms = (Room(merged), Room(own))
+                n = sum(contradictions(t, mine, np.zeros(3), rooms) for t in theirs)
+            conflicts = inside = overlap_m2 = 0.0
+            for m in maps:
+                ev = fit_at(m, own, np.zeros(3))
+                conflicts += ev["conflict_share"] * ev["walls_inside"]
+                inside += ev["walls_inside"]
+                overlap_m2 += ev["overlap_m2"]
+            return n, conflicts / max(inside, 1.0), overlap_m2
 
-        return count
+        return audit
 
     def _undo(self, rid: str, main, now_s: float) -> Anchor:
         """Take ``rid`` out of the merged map and back to waiting; the ``own`` anchor
         that withdraws its frame."""
         a = self.audits.pop(rid)
         log.warning(
-            "robot %s: %d moments since its merge contradict its frame: merge undone",
+            "robot %s: %d moments since its merge contradict its frame, its map conflicted "
+            "with earlier ones in %d audits in a row: merge undone",
             rid,
             a.contradicted,
+            a.conflicting,
         )
         info = main.withdraw(rid)
         solo = self._solo(rid, info.start)  # its start, in the coordinates it speaks in

@@ -341,9 +341,18 @@ def _evidence(a: _MapView, b: _MapView, pose: np.ndarray) -> dict:
         "agreeing_wall_m": 0.5 * agreeing * WALL_STEP_M,
         "agreeing_share": agreeing / inside,
         "conflict_share": conflicts / inside,
+        "walls_inside": inside,  # wall points of both maps in the shared space (and 0.3 m on)
         # the score the verification ranks by: agreement less conflicts
         "score": float(agreeing - VERIFY_CONFLICT_WEIGHT * conflicts),
     }
+
+
+def fit_at(a: GridPolyMap, b: GridPolyMap, pose) -> dict:
+    """How map B placed at ``pose`` (B's frame in A's) fits map A, as a match verifies
+    it: ``overlap_m2``, ``agreeing_wall_m``, ``agreeing_share``, ``conflict_share`` (of
+    the wall points near the shared space, ``walls_inside``, those standing in the
+    other map's clear space)."""
+    return _evidence(_view(a), _view(b), np.asarray(pose, dtype=float))
 
 
 def _inconsistency(ev: dict) -> str:
@@ -496,7 +505,7 @@ def _decide(refined: list, candidates: int, contradicted: int = 0) -> MapMatch:
         margin_wall_m=margin_m,
         refined=tuple(refined),
         contradicted=contradicted,
-        **ev,
+        **{k: v for k, v in ev.items() if k != "walls_inside"},
     )
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import shapely
 
 from polyswarm.config import Config, RobotEntry, known_starts
@@ -264,25 +265,31 @@ def _ticks(frames, main, now: float, until, wall_s: float = 120.0) -> tuple[list
     return sent, now
 
 
-def test_a_merge_the_sightings_contradict_later_is_undone_and_the_frame_found_again():
+@pytest.mark.parametrize("sightings", [True, False], ids=["sightings", "maps alone"])
+def test_a_merge_contradicted_later_is_undone_and_the_frame_found_again(sightings, caplog):
     """r2's frame is committed 3 m off (as ``launch --wrong-anchor`` does) and its map
     merged. Afterwards r1 sees r2 where r2 really is, not where that frame puts it (2.5 m
-    from r1, in its clear view): the audit undoes the merge. r2's cells leave the merged
-    map (its solo coordinator keeps them: nothing is lost), it is sent an ``own`` anchor
-    and waits again in the coordinates it speaks in; the next matches and sightings
-    anchor it right (anchor 3: the true frame, seen from those coordinates)."""
-    from agents.anchoring import RESEND_S, UNDO_CONTRADICTIONS
+    from r1, in its clear view), and r2's map's walls stand in r1's explored space;
+    either undoes the merge. r2's cells leave the merged map (its solo coordinator keeps
+    them: nothing is lost), it is sent an ``own`` anchor and waits again in the
+    coordinates it speaks in; the next matches and sightings anchor it right (anchor 3:
+    the true frame, seen from those coordinates)."""
+    from agents.anchoring import RESEND_S, UNDO_AUDITS, UNDO_CONTRADICTIONS
     from protocols.messages import Pose
     from tests.test_sighting import profile_with_a_robot_at
 
     truth = np.array([4.0, -3.0, 2.1])
     wrong = compose(truth, np.array([3.0, 0.0, 0.0]))
     frames, main, truth, area, moved = _handed_over(wrong)
-    for k in range(UNDO_CONTRADICTIONS + 4):  # r2 stands still; r1 sees it at the truth
-        frames.sighted("r1", 2.0 + k, Pose(0.0, 0.0, 0.0, clear=profile_with_a_robot_at(truth[:2])))
+    caplog.set_level("INFO", logger="agents.anchoring")
+    for k in range(UNDO_CONTRADICTIONS + 4 if sightings else 0):  # r1 sees r2 at the truth
+        clear = profile_with_a_robot_at(truth[:2])
+        frames.sighted("r1", 2.0 + k, Pose(0.0, 0.0, 0.0, clear=clear))
         frames.sighted("r2", 2.0 + k, Pose(*wrong, frame=1))
     sent, now = _ticks(frames, main, 2.0, lambda: frames.undone > 0)
     assert frames.undone == 1, "the audit did not undo the merge"
+    if not sightings:  # one audit's conflicts are not trusted
+        assert f"earlier ones in {UNDO_AUDITS} audits in a row: merge undone" in caplog.text
     [(rid, release)] = sent
     assert rid == "r2" and release.own and release.frame == 2
     assert (release.x, release.y, release.theta) == (0.0, 0.0, 0.0)
@@ -315,7 +322,8 @@ def test_a_merge_the_sightings_contradict_later_is_undone_and_the_frame_found_ag
 
 def test_a_merge_the_sightings_agree_with_is_audited_and_kept():
     """The same hand-over at the true frame; r1 sees r2 where that frame puts it, at
-    every moment: the audits run and find nothing against it."""
+    every moment: the audits run and find nothing against it (no moment, no wall in
+    r1's clear space)."""
     from protocols.messages import Pose
     from tests.test_sighting import profile_with_a_robot_at
 
@@ -332,6 +340,7 @@ def test_a_merge_the_sightings_agree_with_is_audited_and_kept():
         return len(runs) >= 3 and all(r.done() for r in runs)
 
     _ticks(frames, main, 2.0, three_audits, wall_s=60.0)
-    assert len(runs) >= 3 and all(r.result() == 0 for r in runs)
+    assert len(runs) >= 3
+    assert all(r.result()[0] == 0 and r.result()[1] < 0.01 < r.result()[2] for r in runs)
     assert frames.undone == 0 and "r2" in main.robots and "r2" not in frames.waiting
     frames.close()
