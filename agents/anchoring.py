@@ -151,6 +151,10 @@ class Anchoring:
         for rid in unknown:
             self.waiting[rid] = _Waiting(self._solo(rid, np.zeros(3)))
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="mapmatch") if unknown else None
+        # audits on a thread of their own: queued behind matches of a large map (94 s of
+        # wall time each on the maze, beside the robots' processes on 2 cores), an undo
+        # came 169 simulated seconds after the wrong merge
+        self._audit_pool = ThreadPoolExecutor(1, thread_name_prefix="audit") if unknown else None
         self.anchored: dict[str, np.ndarray] = {}  # robot -> its frame in the shared one
         self.audits: dict[str, _Audit] = {}  # robots merged on a frame found here
         self.undone = 0  # merges undone
@@ -178,8 +182,9 @@ class Anchoring:
         return [w.solo for w in self.waiting.values()]
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+        for pool in (self._pool, self._audit_pool):
+            if pool is not None:
+                pool.shutdown(wait=False, cancel_futures=True)
 
     # -- each loop of the coordinator ---------------------------------------------------------
 
@@ -261,7 +266,7 @@ class Anchoring:
                 a.last_s = now_s
                 audit = self._audit_evidence(rid, a, main)
                 if audit is not None:
-                    a.running = self._pool.submit(audit)
+                    a.running = self._audit_pool.submit(audit)
         return out
 
     def _audit_evidence(self, rid: str, a: _Audit, main):

@@ -41,6 +41,7 @@ class RunSpec:
     seed: int
     profile: str = "thesis"
     start: str = "side-by-side"  # or "scattered" (told), "unknown" (scattered, not told)
+    wrong_anchor: str = ""  # unknown starts: ROBOT:dx,dy,deg, its first frame sent that far off
 
 
 def plan_runs(
@@ -51,14 +52,16 @@ def plan_runs(
     first_seed: int = 0,
     profile: str = "thesis",
     unknown_start: bool = False,
+    wrong_anchor: str = "",
 ) -> list[RunSpec]:
     """World x robot count (hungarian) x seed (``first_seed`` .. ``first_seed + seeds -
     1``), plus 3-robot ``nearest`` on NEAREST_WORLDS. ``unknown_start``: instead, each
-    world, robot count and seed twice from the same scattered starts, told and not told."""
+    world, robot count and seed twice from the same scattered starts, told and not told
+    (with ``wrong_anchor``, a fault injection, in the runs not told)."""
     seed_range = range(first_seed, first_seed + seeds)
     if unknown_start:
         return [
-            RunSpec(w, n, "hungarian", s, profile, start)
+            RunSpec(w, n, "hungarian", s, profile, start, wrong_anchor * (start == "unknown"))
             for w in worlds
             for n in robots
             for s in seed_range
@@ -93,6 +96,7 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         config=with_profile(Config(), spec.profile),
         scatter=spec.start == "scattered",
         unknown_start=spec.start == "unknown",
+        wrong_anchor=spec.wrong_anchor,
     )
     m = launch(opts).metrics
     row = {
@@ -102,6 +106,7 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         "seed": spec.seed,
         "profile": spec.profile,
         "start": spec.start,
+        "wrong_anchor": spec.wrong_anchor,
         "anchors": m["anchors"],
         "anchor_events": m.get("anchor_events", []),
         "unanchored": m["unanchored"],
@@ -304,12 +309,15 @@ def run(
     first_seed: int = 0,
     profiles: tuple[str, ...] = ("thesis",),
     unknown_start: bool = False,
+    wrong_anchor: str = "",
 ) -> dict:
     out = out or Path(tempfile.mkdtemp(prefix="polyswarm-bench-explore-"))
     runs = [
         spec
         for prof in profiles
-        for spec in plan_runs(worlds, robots, seeds, nearest, first_seed, prof, unknown_start)
+        for spec in plan_runs(
+            worlds, robots, seeds, nearest, first_seed, prof, unknown_start, wrong_anchor
+        )
     ]
     rows, references = [], {}
     for k, spec in enumerate(runs):

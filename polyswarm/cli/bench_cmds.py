@@ -435,6 +435,11 @@ def bench_explore(
         help="Instead: each run twice from the same scattered random starts, told and not "
         "told (launch --unknown-start); frames found, wrong merges, t99 ratio.",
     ),
+    wrong_anchor: str = typer.Option(
+        "",
+        help="With --unknown-start, a fault injection in the runs not told: ROBOT's first "
+        "frame sent DX m, DY m and DEG degrees off (ROBOT:DX,DY,DEG); merges undone counted.",
+    ),
 ) -> None:
     """Whole explorations (t99, success, IoU) against the idealised reference run for the
     same world, robots and profile, and the coordinator cycle under load.
@@ -443,12 +448,14 @@ def bench_explore(
     for a subset. The reference's runs are cached in runs/reference-cache/."""
     from rich.console import Console
 
+    from agents.anchoring import wrong_anchor_fault
     from polyswarm.benchmarks import explore as eb
     from polyswarm.config import Config, with_profile
 
     names = _names(profile)
     for name in names:
         with_profile(Config(), name)  # an unknown profile fails here, before any run
+    wrong_anchor_fault(wrong_anchor)  # and a bad fault
     console = Console(stderr=True)
     with console.status("explorations") as status:
 
@@ -480,6 +487,7 @@ def bench_explore(
             first_seed,
             names,
             unknown_start,
+            wrong_anchor,
         )
     _save(save, res)
     if as_json:
@@ -847,8 +855,8 @@ def _unknown_table(res: dict, seeds: int) -> None:
     from rich.table import Table
 
     t = Table(title=f"Unknown starts against the same starts told, {seeds} seed(s)")
-    cols = ("profile", "world", "robots", "success", "all anchored", "wrong merges")
-    for col in (*cols, "frame err max", "t99 ratio median", "worst"):
+    cols = ("profile", "world", "robots", "success", "all anchored", "wrong merges left")
+    for col in (*cols, "wrong sent, undone", "frame err max", "t99 ratio median", "worst"):
         t.add_column(col, justify="right")
     for prof, ws in res.items():
         for w, by_n in ws.items():
@@ -861,6 +869,7 @@ def _unknown_table(res: dict, seeds: int) -> None:
                     f"{d['success_rate']:.2f}",
                     "yes" if d["all_anchored"] else "no",
                     str(d["wrong_merges"]),
+                    f"{d['wrong_frames_sent']}, {d['merges_undone']}",
                     "-" if err is None else f"{err:.3f} m, {d['frame_err_deg_max']:.2f} deg",
                     "-" if d["t99_ratio_median"] is None else f"{d['t99_ratio_median']:.2f}",
                     "-" if d["t99_ratio_worst"] is None else f"{d['t99_ratio_worst']:.2f}",
