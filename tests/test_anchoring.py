@@ -344,3 +344,33 @@ def test_a_merge_the_sightings_agree_with_is_audited_and_kept():
     assert all(r.result()[0] == 0 and r.result()[1] < 0.01 < r.result()[2] for r in runs)
     assert frames.undone == 0 and "r2" in main.robots and "r2" not in frames.waiting
     frames.close()
+
+
+def test_a_right_frame_is_held_against_maps_not_in_doubt_not_a_wrong_one_before_it():
+    """r2 was merged 3 m off, r3 right, after it. r3's audit holds its map against r1's
+    (the first robot: its frame is not in doubt), not r2's: no conflict. r2's own audit
+    finds most of its shared walls in r1's clear space."""
+    from shapely.geometry import box
+
+    from agents.anchoring import UNDO_CONFLICT_SHARE, Anchoring, _Audit
+    from agents.coordinator import Coordinator, RobotInfo
+    from tests.test_mapmatch import _seen
+
+    truth = np.array([4.0, -3.0, 2.1])
+    wrong = compose(truth, np.array([3.0, 0.0, 0.0]))
+    cfg = Config()
+    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
+    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    frames = Anchoring(cfg, ["r2", "r3"])
+    east = _seen(box(8, -8, 25, 9), truth)  # in the robots' own frames
+    for rid, frame, since_s in (("r2", wrong, 1.0), ("r3", truth, 2.0)):
+        del frames.waiting[rid]
+        main.robots[rid] = RobotInfo(rid, frame)
+        main.robots[rid].map = transform_map(east, frame)
+        frames.audits[rid] = _Audit(1, since_s)
+    n3, share3, overlap3 = frames._audit_evidence("r3", frames.audits["r3"], main)()
+    n2, share2, overlap2 = frames._audit_evidence("r2", frames.audits["r2"], main)()
+    assert n2 == n3 == 0  # no sightings
+    assert share3 < 0.01 and overlap3 > 10.0
+    assert share2 > UNDO_CONFLICT_SHARE and overlap2 > 10.0
+    frames.close()
