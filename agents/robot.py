@@ -130,8 +130,8 @@ class RobotAgent:
         self._anchor: Anchor | None = None  # the anchor SLAM applies at the next scan
         # robots whose starts nobody gave: their poses mean nothing here until anchored
         self._own_frames = {rid for rid, st in known_starts(cfg.robots).items() if st is None}
-        # send clear profiles (None: while a robot is in a frame of its own; benchmarks
-        # that know every start but measure the matching set it True)
+        # send clear profiles (None: when a robot of the swarm started in a frame of its
+        # own; benchmarks that know every start but measure the matching set it True)
         self.sightings: bool | None = None
         lidar = cfg.sim.lidar
         self.slam = PolySlam(
