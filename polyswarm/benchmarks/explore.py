@@ -61,7 +61,9 @@ def plan_runs(
     seed_range = range(first_seed, first_seed + seeds)
     if unknown_start:
         return [
-            RunSpec(w, n, "hungarian", s, profile, start, wrong_anchor * (start == "unknown"))
+            RunSpec(
+                w, n, "hungarian", s, profile, start, wrong_anchor if start == "unknown" else ""
+            )
             for w in worlds
             for n in robots
             for s in seed_range
