@@ -418,14 +418,17 @@ class Anchoring:
 
         return contradicts, seen_at
 
-    def on_pose(self, rid: str, frame: int, map_version: int, main) -> bool:
+    def on_pose(self, rid: str, frame: int, map_version: int, main, own: bool = False) -> bool:
         """A pose of ``rid`` naming ``frame`` at its map ``map_version``: hands the robot
         over to ``main`` once it names its anchor and its solo coordinator's copy of its
         map has caught up (the anchor's correction replayed: the copy is in the shared
-        frame). True when it was handed over now."""
+        frame). True when it was handed over now. ``own``: the pose says that anchor
+        withdrew its frame (a coordinator restarted since learns it so)."""
         w = self.waiting.get(rid)
         if w is None:
             return False
+        if own and frame > w.frame and w.anchor is None:
+            w.frame = frame  # in a frame of its own, numbered so: not to be handed over
         if w.release is not None and frame >= w.release.frame:
             w.release = None  # its frame is its own now: the withdrawal is not sent again
         if frame <= w.frame or (w.anchor is not None and frame < w.anchor.frame):

@@ -1170,7 +1170,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         if isinstance(msg, Pose):
                             anchoring.sighted(rid, item.stamp_s, msg)
                             if rid in anchoring.waiting:
-                                anchoring.on_pose(rid, msg.frame, msg.map_version, coord)
+                                anchoring.on_pose(rid, msg.frame, msg.map_version, coord, msg.own)
                         owner = anchoring.owner(rid, coord)
                         if owner is not coord:  # exploring alone: its own coordinator
                             _robot_message(owner, rid, item, resync)

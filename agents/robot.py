@@ -276,8 +276,8 @@ class RobotAgent:
     def on_peer_pose(self, rid: str, stamp_s: float, pose: Pose) -> None:
         if rid == self.id or not self.in_shared_frame:
             return
-        if rid in self._own_frames and pose.frame == 0:
-            return  # a robot still in a frame of its own
+        if rid in self._own_frames and (pose.frame == 0 or pose.own):
+            return  # a robot in a frame of its own (still, or again)
         self.peers[rid] = (stamp_s, np.array([pose.x, pose.y]))
         self.behaviour.on_peer(rid, stamp_s, self.peers[rid][1], pose.blocked_by, self.pose)
 
@@ -326,7 +326,12 @@ class RobotAgent:
                 self._last_clear_t = stamp_s
                 clear = self._clear_profile(scan, xy)
             out.pose = Pose(
-                *map(float, self.pose), self.slam.map.version, blocked_by, self.frame, clear
+                *map(float, self.pose),
+                self.slam.map.version,
+                blocked_by,
+                self.frame,
+                clear,
+                self.own_frame,
             )
         if self.behaviour.changed or stamp_s - self._last_status_t >= STATUS_PERIOD_S:
             self._last_status_t = stamp_s

@@ -277,7 +277,8 @@ class CmdVel(Message):
 class Pose(Message):
     """A robot's SLAM pose estimate in the swarm's map frame (``frame`` 0: a robot whose
     start pose nobody gave is in a frame of its own until the ``anchor`` numbered
-    ``frame`` has put it into the swarm's)."""
+    ``frame`` has put it into the swarm's; ``own``: the anchor numbered ``frame``
+    withdrew it from the swarm's frame, and it is in a frame of its own again)."""
 
     TYPE: ClassVar[str] = "pose"
     x: float
@@ -289,6 +290,7 @@ class Pose(Message):
     # the latest scan's clear profile (``polyswarm.sighting``), sent while a robot of
     # the swarm is in a frame of its own; b"": not sent
     clear: bytes = b""
+    own: bool = False
 
     def body(self) -> dict:
         out = {"x": self.x, "y": self.y, "th": self.theta, "ver": self.map_version}
@@ -298,6 +300,8 @@ class Pose(Message):
             out["frame"] = self.frame
         if self.clear:
             out["clr"] = self.clear
+        if self.own:
+            out["own"] = 1
         return out
 
     @classmethod
@@ -313,6 +317,7 @@ class Pose(Message):
             wait,
             _int(b.get("frame", 0), "frame", 0),
             _clear(b.get("clr", b"")),
+            _int(b.get("own", 0), "own", 0, 1) == 1,
         )
 
 

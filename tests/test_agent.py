@@ -120,7 +120,7 @@ def test_a_withdrawn_frame_is_a_frame_of_its_own_until_the_next_anchor(tmp_path)
     from polyswarm.config import RobotEntry
     from protocols.messages import Anchor
 
-    cfg = replace(Config(), robots=(RobotEntry("r1"), RobotEntry("r2")))
+    cfg = replace(Config(), robots=(RobotEntry("r1"), RobotEntry("r2"), RobotEntry("r3")))
     agent = RobotAgent("r2", cfg, (0.0, 0.0, 0.0), frame_known=False)
     agent.frame = 1  # anchored once
     agent.on_odom(0.0, Odometry(0.0, 0.0, 0.0))
@@ -134,16 +134,23 @@ def test_a_withdrawn_frame_is_a_frame_of_its_own_until_the_next_anchor(tmp_path)
     agent.on_peer_pose("r1", 0.1, Pose(1.0, 0.0, 0.0, frame=0))
     assert agent.peers == {}
     agent.on_anchor(Anchor(2, 0.0, 0.0, 0.0, own=True))  # a resend: nothing
-    agent.on_odom(0.1, Odometry(0.0, 0.0, 0.0))
-    out = agent.on_scan(0.1, room_scan(0.1))
-    assert out.pose is None or out.pose.frame == 2
+    poses = []
+    for k in range(1, 8):  # its poses say so (peers do not plan around it)
+        agent.on_odom(0.1 * k, Odometry(0.0, 0.0, 0.0))
+        out = agent.on_scan(0.1 * k, room_scan(0.1 * k))
+        poses += [out.pose] if out.pose is not None else []
+    assert poses and all(p.frame == 2 and p.own for p in poses)
     assert agent.slam.map.version == version  # nothing moved
     persist.save_agent(tmp_path, "r2", agent.slam.map, agent.pose, frame=2, own_frame=True)
     again = RobotAgent("r2", cfg, (0.0, 0.0, 0.0), frame_known=False)
     again.resume(*persist.load_agent(tmp_path, "r2"))
     assert again.frame == 2 and again.own_frame and not again.in_shared_frame
     agent.on_anchor(Anchor(3, 1.0, 2.0, 0.5))
-    agent.on_odom(0.2, Odometry(0.0, 0.0, 0.0))
-    agent.on_scan(0.2, room_scan(0.2))
+    agent.on_odom(0.8, Odometry(0.0, 0.0, 0.0))
+    agent.on_scan(0.8, room_scan(0.8))
     assert agent.frame == 3 and not agent.own_frame and agent.in_shared_frame
     assert np.allclose(agent.pose, [1.0, 2.0, 0.5], atol=1e-6)
+    agent.on_peer_pose("r3", 0.9, Pose(4.0, 0.0, 0.0, frame=2, own=True))
+    assert "r3" not in agent.peers  # a peer whose frame was withdrawn: not planned around
+    agent.on_peer_pose("r3", 0.9, Pose(4.0, 0.0, 0.0, frame=3))
+    assert "r3" in agent.peers

@@ -374,3 +374,28 @@ def test_a_right_frame_is_held_against_maps_not_in_doubt_not_a_wrong_one_before_
     assert share3 < 0.01 and overlap3 > 10.0
     assert share2 > UNDO_CONFLICT_SHARE and overlap2 > 10.0
     frames.close()
+
+
+def test_a_restarted_coordinator_leaves_a_robot_whose_frame_was_withdrawn_waiting():
+    """After a restart every robot without a start pose waits; one whose poses name an
+    anchor is taken as anchored, but not one whose poses say that anchor withdrew its
+    frame: it keeps waiting, and its poses count as sightings in its own frame."""
+    from shapely.geometry import box
+
+    from agents.anchoring import Anchoring
+    from agents.coordinator import Coordinator
+    from protocols.messages import Pose
+    from tests.test_mapmatch import _seen
+
+    cfg = Config()
+    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
+    frames = Anchoring(cfg, ["r2", "r3"])
+    for rid in ("r2", "r3"):
+        frames.owner(rid, main).on_robot_map(rid, _seen(box(8, -8, 25, 9)))
+    assert not frames.on_pose("r2", 2, 0, main, own=True)
+    assert "r2" in frames.waiting and frames.waiting["r2"].frame == 2
+    frames.sighted("r2", 1.0, Pose(1.0, 2.0, 0.0, frame=2, own=True))
+    assert len(frames.tracks["r2"]) == 1
+    assert frames.on_pose("r3", 1, 0, main)  # anchored before the restart: handed over
+    assert "r3" not in frames.waiting
+    frames.close()

@@ -250,6 +250,9 @@ def test_a_pose_names_its_frame_only_once_anchored():
     with pytest.raises(ProtocolError):  # not in the same building
         decode(encode(Anchor(1, 3.0e6, -4.0, 1.5), "coordinator", 0, 0.0), Anchor)
     assert "own" not in Anchor(1, 3.0, -4.0, 1.5).body()  # as older senders wrote it
+    assert "own" not in plain.body()
+    _, p = decode(encode(Pose(1.0, 2.0, 0.5, 3, "", 2, own=True), "r1", 0, 0.0), Pose)
+    assert p.own and p.frame == 2
     _, w = decode(encode(Anchor(2, 0.0, 0.0, 0.0, own=True), "coordinator", 0, 0.0), Anchor)
     assert w.own and w.frame == 2
     with pytest.raises(ProtocolError):  # a withdrawal moves nothing
