@@ -273,7 +273,7 @@ class Anchoring:
     def _audit_evidence(self, rid: str, a: _Audit, main):
         """A function measuring what came since ``rid``'s hand-over against its frame:
         (moments the robots' sightings contradict it, the share of the walls its map
-        shares with the maps merged before it that stand in their clear space, the
+        shares with the maps it is held against that stand in their clear space, the
         explored area shared); None while its map is not in.
 
         The maps it is held against: those of the robots whose frames nobody audits

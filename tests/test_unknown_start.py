@@ -28,5 +28,10 @@ def test_robots_at_unknown_scattered_starts_are_found_merged_and_explore(tmp_pat
     assert m["final_coverage"] >= 0.99 and m["map_iou"] >= 0.95
     assert m["collisions"] == {"walls": 0, "robots": 0}
     log = " ".join((out / "logs" / "coordinator.log").read_text().split())
-    # matched, committed, then handed over (never merged in its own frame)
-    assert log.index("frame of r2 committed") < log.index("robot r2 joins the swarm's map")
+    # matched, committed, then handed over (never merged in its own frame); the launch
+    # stops once 99 % is covered and every frame is placed, which can come between the
+    # commit and the hand-over (one run of the suite: r2 committed at 315 s, r1 had
+    # covered 99 % alone at 213 s)
+    committed = log.index("frame of r2 committed")
+    joined = log.find("robot r2 joins the swarm's map")
+    assert joined == -1 or committed < joined
