@@ -298,17 +298,16 @@ class Anchoring:
             for o, other in main.robots.items()
             if o != rid and o in self.tracks
         ]
-        own, merged = info.map, main.merged
+        own = info.map
+        seen = mine is not None and len(mine) > 0 and bool(theirs)
+        count = _contradiction_count(theirs, mine, (main.merged, own)) if seen else None
 
         def audit() -> tuple[int, float, float]:
-            n = 0
-            if mine is not None and len(mine) and theirs:
-                rooms = (Room(merged), Room(own))
-                n = sum(contradictions(t, mine, np.zeros(3), rooms) for t in theirs)
-            fits = [(root, fit_at(m, own, np.zeros(3))) for root, m in earlier]
-            roots = [ev for root, ev in fits if root]
+            n = count(np.zeros(3)) if count is not None else 0
+            fits = fit_at([m for _, m in earlier], own, np.zeros(3))
+            roots = [ev for (root, _), ev in zip(earlier, fits, strict=True) if root]
             if sum(ev["overlap_m2"] for ev in roots) < MIN_OVERLAP_M2:
-                roots = [ev for _, ev in fits]
+                roots = fits
             conflicts = sum(ev["conflict_share"] * ev["walls_inside"] for ev in roots)
             inside = sum(ev["walls_inside"] for ev in roots)
             return n, conflicts / max(inside, 1.0), sum(ev["overlap_m2"] for ev in roots)
@@ -405,13 +404,10 @@ class Anchoring:
             return None, None
         mine = mine.since(self.waiting[rid].solo.robots[rid].corrected_s)
         maps = (main.merged, self.waiting[rid].solo.robots[rid].map)
-        rooms: list = []  # where the robots can stand in each map: built in the matching thread
+        count = _contradiction_count(theirs, mine, maps)
 
         def contradicts(frame: np.ndarray) -> bool:
-            if not rooms:
-                rooms.extend([Room(maps[0]), Room(maps[1])])
-            n = sum(contradictions(t, mine, frame, (rooms[0], rooms[1])) for t in theirs)
-            return n >= MIN_CONTRADICTIONS
+            return count(frame) >= MIN_CONTRADICTIONS
 
         def seen_at(frame: np.ndarray) -> int:  # places in the shared frame, all robots'
             return distinct_places(np.vstack([mutual_seen(t, mine, frame, maps) for t in theirs]))
@@ -457,6 +453,21 @@ class Anchoring:
             main.on_robot_map(rid, solo.map, solo.atlas)
         log.info("robot %s joins the swarm's map (%d matches)", rid, w.matches)
         return True
+
+
+def _contradiction_count(theirs: list[Track], mine: Track, maps):
+    """A function of a frame of ``mine``'s robot (in the frame of ``maps[0]``): the
+    moments the sightings contradict it (``polyswarm.sighting.contradictions``, summed
+    over the other robots' tracks ``theirs``). Where the robots can stand in each map
+    (``Room``) is built at the first call, in the thread that calls it."""
+    rooms: list[Room] = []
+
+    def count(frame: np.ndarray) -> int:
+        if not rooms:
+            rooms.extend([Room(maps[0]), Room(maps[1])])
+        return sum(contradictions(t, mine, frame, (rooms[0], rooms[1])) for t in theirs)
+
+    return count
 
 
 def _match(merged, own, contradicts, seen_at) -> tuple[MapMatch, int]:

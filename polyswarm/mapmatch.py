@@ -347,12 +347,13 @@ def _evidence(a: _MapView, b: _MapView, pose: np.ndarray) -> dict:
     }
 
 
-def fit_at(a: GridPolyMap, b: GridPolyMap, pose) -> dict:
-    """How map B placed at ``pose`` (B's frame in A's) fits map A, as a match verifies
-    it: ``overlap_m2``, ``agreeing_wall_m``, ``agreeing_share``, ``conflict_share`` (of
-    the wall points near the shared space, ``walls_inside``, those standing in the
-    other map's clear space)."""
-    return _evidence(_view(a), _view(b), np.asarray(pose, dtype=float))
+def fit_at(maps: list[GridPolyMap], b: GridPolyMap, pose) -> list[dict]:
+    """How map B placed at ``pose`` (B's frame in theirs) fits each of ``maps``, as a
+    match verifies it: ``overlap_m2``, ``agreeing_wall_m``, ``agreeing_share``,
+    ``conflict_share`` (of the wall points near the shared space, ``walls_inside``,
+    those standing in the other map's clear space). B is rasterised once."""
+    vb, pose = _view(b), np.asarray(pose, dtype=float)
+    return [_evidence(_view(a), vb, pose) for a in maps]
 
 
 def _inconsistency(ev: dict) -> str:
