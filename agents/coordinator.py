@@ -45,6 +45,7 @@ from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
 from polyswarm.explore import GraphIndex, Reach, Strategy, assign, target_groups
 from polyswarm.follow import Atlas, CorrectionOp, largest_move_m, replay_correction
+from polyswarm.jointgraph import KeyframeLedger
 from polyswarm.navgraph import NavGraph, clear_of
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions, VectorType
 from polyswarm.sighting import SIGHTING_SLACK_M
@@ -135,6 +136,9 @@ class RobotInfo:
     map: GridPolyMap | None = None
     # the keyframes its merges carried, to replay its corrections (polyswarm.follow)
     atlas: Atlas = field(default_factory=Atlas)
+    # the same keyframes' walls and frames, for the joint pose graph (agents.joint)
+    ledger: KeyframeLedger = field(default_factory=KeyframeLedger)
+    frame: int = 0  # the anchor its poses name (0: its start was given)
     status: RobotStatus | None = None
     assignment: Assignment | None = None
     sent_t: float = -math.inf
@@ -289,6 +293,7 @@ class Coordinator:
         self.now = max(self.now, stamp_s)
         info = self.robot(rid)
         info.pose = np.array([pose.x, pose.y, pose.theta])
+        info.frame = pose.frame
         info.announced = max(info.announced, pose.map_version)
         info.pose_t = max(info.pose_t, stamp_s)
         self._check_behind(info)
@@ -373,6 +378,8 @@ class Coordinator:
         Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
         self.now = max(self.now, stamp_s)
         info = self.robot(rid)
+        if op.keyframe is not None and op.keyframe not in info.ledger.keyframes:
+            info.ledger.merged(op.keyframe, op.polygon)
         if self.pool is not None:
             return self._to_pool(info, "merge", op, stamp_s)
         if info.map is None:
@@ -402,6 +409,7 @@ class Coordinator:
         Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
         self.now = max(self.now, stamp_s)
         info = self.robot(rid)
+        info.ledger.corrected(op.moves)
         if self.pool is not None:
             return self._to_pool(info, "correct", op, stamp_s)
         if info.map is None:
@@ -548,6 +556,8 @@ class Coordinator:
             old = info.map.cells
             self._rebuild |= {i for i, c in old.items() if not c.same_content(pmap.cells.get(i))}
         self._set_map(info, pmap, atlas)
+        if atlas is not None:
+            info.ledger = KeyframeLedger.from_atlas(atlas)
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(pmap.cells)
 
@@ -1111,6 +1121,7 @@ def _points_cm(points) -> tuple[tuple[float, float], ...]:
 def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = None) -> Coordinator:
     """Run the coordinator until ``stop`` is set (or SIGINT/SIGTERM)."""
     from agents.anchoring import Anchoring
+    from agents.joint import JointCorrections
     from agents.session import Bus, is_alive_change, open_session, stop_on_signals
 
     stop = stop or stop_on_signals()
@@ -1120,6 +1131,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
     coord = Coordinator(cfg, robots)
     # robots whose start poses were not given explore alone until their frames are found
     anchoring = Anchoring(cfg, [rid for rid, st in starts.items() if st is None])
+    joint = JointCorrections() if cfg.explore.joint_graph else None
     state_dir = cfg.persist.dir
     journal = persist.CoordinatorJournal(state_dir) if state_dir else None
     if state_dir:
@@ -1233,6 +1245,8 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 now = max([coord.now, *(s.now for s in anchoring.coordinators())])
                 for rid, anchor in anchoring.tick(coord, now):
                     coord.bytes_sent += bus.publish(keys.anchor(rid), anchor, now, reliable=True)
+                for rid, priors in joint.tick(coord, now, set(anchoring.audits)) if joint else []:
+                    coord.bytes_sent += bus.publish(keys.priors(rid), priors, now, reliable=True)
                 if coord.flush_due():
                     delta = coord.flush()
                     with coord.timed("publish"):
@@ -1251,6 +1265,8 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         )
         finally:
             anchoring.close()
+            if joint is not None:
+                joint.close()
             bus.close()
             if pool is not None:  # what robots sent is replayed and journaled, merged below
                 coord.drain()

@@ -30,7 +30,7 @@ from agents.seen import SeenObstacles
 from polyswarm.config import Config, SensorSource, known_starts
 from polyswarm.control import ControlParams, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
-from polyswarm.follow import CorrectionOp
+from polyswarm.follow import CorrectionOp, pose_of
 from polyswarm.navgraph import NavGraph, clear_of
 from polyswarm.odometry import OdometryBuffer
 from polyswarm.planner import Planner
@@ -58,6 +58,7 @@ from protocols.messages import (
     MapKind,
     Odometry,
     Pose,
+    Priors,
     RobotState,
     RobotStatus,
     Scan,
@@ -233,6 +234,19 @@ class RobotAgent:
         log.info("%s: anchor %d: moving into the shared frame", self.id, a.frame)
         self._anchor = a
         self.slam.anchor((a.x, a.y, a.theta))
+
+    def on_priors(self, p: Priors) -> int:
+        """Where the swarm's joint pose graph puts some of this robot's keyframes
+        (``polyswarm.jointgraph``): held in SLAM's pose graph from the next keyframe
+        on. Ignored when they are in another frame than the robot's (an anchor since, or
+        its frame withdrawn). The priors taken."""
+        if p.frame != self.frame or self.own_frame or self._anchor is not None:
+            log.info("%s: priors in frame %d ignored (frame %d)", self.id, p.frame, self.frame)
+            return 0
+        frames = {kid: np.array(pose_of((x, y, th))) for kid, x, y, th in p.poses}
+        n = self.slam.constrain(frames, p.sigma_m, p.sigma_rad)
+        log.info("%s: %d of %d keyframe priors from the joint pose graph", self.id, n, len(frames))
+        return n
 
     def _anchored(self, now_s: float) -> None:
         """SLAM moved into the anchor's frame in this step: so do the start, goals, peers."""
@@ -557,6 +571,7 @@ def run_agent(
             bus.subscribe(keys.all_robots("pose"), Pose)
             bus.subscribe(keys.assignment(robot_id), Assignment)
             bus.subscribe(keys.anchor(robot_id), Anchor)
+            bus.subscribe(keys.priors(robot_id), Priors)
             bus.subscribe(keys.merged_delta, MapChunk)
             bus.subscribe(keys.coordinator_status, CoordinatorStatus)
             # all cells exactly: the coordinator's copy must be bit-identical to replay merges
@@ -611,6 +626,8 @@ def run_agent(
                         elif isinstance(msg, Anchor):
                             agent.on_anchor(msg)
                             need_merged = True
+                        elif isinstance(msg, Priors):
+                            agent.on_priors(msg)
                         elif isinstance(msg, MapChunk) and item.payload is not None:
                             try:
                                 agent.on_merged_delta(decode_delta(item.payload))

@@ -370,6 +370,10 @@ class ExploreConfig:
     # facts on a process of its own (agents.merger), while the coordinator plans on the
     # map it has; false: on its thread
     merge_process: bool = True
+    # robots correct each other: the coordinator's joint pose graph over every robot's
+    # keyframes sends priors where one robot's walls align on another's
+    # (polyswarm.jointgraph); false: each robot corrects only itself
+    joint_graph: bool = True
 
 
 @dataclass(frozen=True)

@@ -149,14 +149,38 @@ class _MapView:
     normals: np.ndarray  # (n, 2) unit normal of the vector each wall point lies on
 
 
+@dataclass(frozen=True)
+class Walls:
+    """Wall points every ``WALL_STEP_M`` along obstacle vectors, and the unit normal of
+    the vector each lies on (towards the free space: its left)."""
+
+    walls: np.ndarray  # (n, 2)
+    normals: np.ndarray  # (n, 2)
+
+
+def wall_points(starts: np.ndarray, ends: np.ndarray) -> Walls:
+    if len(starts) == 0:
+        return Walls(np.zeros((0, 2)), np.zeros((0, 2)))
+    walls, owner = sample_vectors(starts, ends, WALL_STEP_M)
+    d = ends[owner] - starts[owner]
+    normals = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    return Walls(walls, normals)
+
+
+def align_walls(a: Walls, b: Walls, pose) -> np.ndarray:
+    """The pose that puts B's wall points (in their own frame) on A's walls, by
+    point-to-line ICP from ``pose`` (a wall face only matches a face seen from the same
+    side); ``pose`` itself if ICP wanders farther than ``ICP_MAX_SHIFT_M``."""
+    return _icp(a, _wall_tree(a), b, np.array(pose, dtype=float))
+
+
 def _view(pmap: GridPolyMap) -> _MapView:
     s, e, _ = pmap.vectors([VectorType.OBSTACLE])
     if len(s) == 0:
         raise MatchError("the map has no walls to match")
-    walls, owner = sample_vectors(s, e, WALL_STEP_M)
-    d = e[owner] - s[owner]
-    normals = np.stack([-d[:, 1], d[:, 0]], axis=1)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    w = wall_points(s, e)
+    walls, normals = w.walls, w.normals
     region = pmap.explored_region()
     x0, y0, x1, y1 = region.bounds
     lo = np.array([x0, y0]) - 1.0
@@ -266,13 +290,13 @@ def _close(p: np.ndarray, q: np.ndarray, d_m: float, d_rad: float) -> bool:
 # -- refine and verify -------------------------------------------------------------------
 
 
-def _wall_tree(v: _MapView) -> cKDTree:
+def _wall_tree(v: _MapView | Walls) -> cKDTree:
     """A's wall points with their normals (scaled): a point matches a wall face seen
     from the same side only (the two faces of a thin wall are apart in normal space)."""
     return cKDTree(np.hstack([v.walls, NORMAL_WEIGHT_M * v.normals]))
 
 
-def _icp(a: _MapView, tree: cKDTree, b: _MapView, pose: np.ndarray) -> np.ndarray:
+def _icp(a: _MapView | Walls, tree: cKDTree, b: _MapView | Walls, pose: np.ndarray) -> np.ndarray:
     """Point-to-line ICP of B's wall points (own frame) on A's walls, the outlier
     cut-off shrinking over the first two thirds of the iterations."""
     start, pose = pose.copy(), pose.copy()

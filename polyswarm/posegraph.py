@@ -6,7 +6,9 @@ Sequential edges come from tracking (each keyframe against the one before), loop
 edges from matching a scan against an old part of the map. ``optimise`` minimises
 the weighted edge errors with a robust (Huber) loss, so a wrong loop edge is
 down-weighted rather than bending the whole trajectory; node 0 stays fixed (it
-anchors the map frame).
+anchors the map frame), unless the graph holds *priors*: poses of nodes in the map
+frame that others measured (``set_priors``: the swarm's joint pose graph,
+``polyswarm.jointgraph``); then the priors hold the frame and node 0 moves too.
 
     g = PoseGraph()
     a = g.add_node((0, 0, 0)); b = g.add_node((1, 0, 0))
@@ -56,6 +58,7 @@ class PoseGraph:
     def __init__(self) -> None:
         self._poses: list[np.ndarray] = []
         self.edges: list[Edge] = []
+        self.priors: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # node -> (pose, sqrt_info)
 
     def __len__(self) -> int:
         return len(self._poses)
@@ -93,6 +96,15 @@ class PoseGraph:
         w = sqrt_information(sigma_m, sigma_rad, weak_axis, weak_sigma_m)
         self.edges.append(Edge(i, j, np.array(z, dtype=float), w, loop))
 
+    def set_priors(self, poses: dict[int, np.ndarray], sigma_m: float, sigma_rad: float) -> None:
+        """Replace the priors: node -> its pose in the map frame (x m, y m, theta rad),
+        each with standard deviations ``sigma_m`` and ``sigma_rad``."""
+        n = len(self._poses)
+        if any(not 0 <= k < n for k in poses) or sigma_m <= 0 or sigma_rad <= 0:
+            raise PolyswarmError(f"priors on nodes {sorted(poses)[:5]}... of a graph of {n}")
+        w = sqrt_information(sigma_m, sigma_rad)
+        self.priors = {int(k): (np.array(p, dtype=float), w) for k, p in poses.items()}
+
     @property
     def loop_edges(self) -> int:
         return sum(e.loop for e in self.edges)
@@ -112,58 +124,108 @@ class PoseGraph:
         i, j, z, w = self._arrays() if arrays is None else arrays
         err = relative_many(poses[i], poses[j]) - z
         err[:, 2] = wrap(err[:, 2])
-        return np.einsum("kab,kb->ka", w, err).ravel()
+        out = np.einsum("kab,kb->ka", w, err).ravel()
+        if not self.priors:
+            return out
+        k, zp, wp = self._prior_arrays()
+        perr = poses[k] - zp
+        perr[:, 2] = wrap(perr[:, 2])
+        return np.concatenate([out, np.einsum("kab,kb->ka", wp, perr).ravel()])
+
+    def _prior_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        k = np.array(sorted(self.priors), dtype=int)
+        return (
+            k,
+            np.array([self.priors[n][0] for n in k]).reshape(-1, 3),
+            np.array([self.priors[n][1] for n in k]).reshape(-1, 3, 3),
+        )
 
     def optimise(self, max_iterations: int = 30) -> np.ndarray:
-        """Optimised poses (node 0 fixed); the graph keeps them as its new estimate.
+        """Optimised poses (node 0 fixed, unless priors hold the frame); the graph keeps
+        them as its new estimate.
 
         Sparse Gauss-Newton with the edges' analytic Jacobians: plain least squares
         first (a true loop edge with a large error must pull), then iteratively
-        reweighted with the Huber loss (edges beyond ``HUBER_SCALE`` sigmas count
-        linearly, so one wrong loop edge does not bend the trajectory)."""
+        reweighted with the Huber loss (edges and priors beyond ``HUBER_SCALE`` sigmas
+        count linearly, so one wrong loop edge does not bend the trajectory)."""
         poses = self.poses
         n = len(poses)
-        if n < 2 or not self.edges:
+        if (n < 2 or not self.edges) and not self.priors:
             return poses
-        i, j, z, w = self._arrays()
-        m = len(self.edges)
-        cost0 = 0.5 * float(np.sum(self.residuals(poses, (i, j, z, w)) ** 2))
+        arrays = self._arrays() if self.edges else None
+        free = 0 if self.priors else 1  # the first free node
+        cost0 = 0.5 * float(np.sum(self.residuals(poses, arrays) ** 2))
         for it in range(max_iterations):
             robust = it >= max_iterations // 3
-            r, Ji, Jj = _linearise(poses, i, j, z)
-            wr = np.einsum("kab,kb->ka", w, r)
-            Wi, Wj = np.einsum("kab,kbc->kac", w, Ji), np.einsum("kab,kbc->kac", w, Jj)
-            if robust:  # Huber weights per edge, from its weighted error's norm
-                norm = np.linalg.norm(wr, axis=1)
-                h = np.sqrt(np.minimum(1.0, HUBER_SCALE / np.maximum(norm, 1e-12)))
-                wr, Wi, Wj = wr * h[:, None], Wi * h[:, None, None], Wj * h[:, None, None]
-            rows = np.repeat(np.arange(3 * m).reshape(m, 3, 1), 3, axis=2)
-            J = scipy.sparse.csr_matrix(
-                (
-                    np.concatenate([Wi.ravel(), Wj.ravel()]),
-                    (
-                        np.concatenate([rows.ravel(), rows.ravel()]),
-                        np.concatenate([_cols(i), _cols(j)]),
-                    ),
-                ),
-                shape=(3 * m, 3 * n),
-            )[:, 3:]  # node 0 is fixed
-            H = (J.T @ J).tocsc() + scipy.sparse.identity(3 * (n - 1)) * 1e-9
-            step = scipy.sparse.linalg.spsolve(H, -(J.T @ wr.ravel()))
-            poses[1:] += step.reshape(-1, 3)
+            rows, J = self._system(poses, arrays, robust)
+            J = J.tocsc()[:, 3 * free :]
+            H = (J.T @ J).tocsc() + scipy.sparse.identity(3 * (n - free)) * 1e-9
+            step = scipy.sparse.linalg.spsolve(H, -(J.T @ rows))
+            poses[free:] += step.reshape(-1, 3)
             poses[:, 2] = wrap(poses[:, 2])
             if np.abs(step).max() < 1e-6 and robust:
                 break
         log.debug(
-            "pose graph: %d nodes, %d edges (%d loops), cost %.3g -> %.3g",
+            "pose graph: %d nodes, %d edges (%d loops), %d priors, cost %.3g -> %.3g",
             n,
-            m,
+            len(self.edges),
             self.loop_edges,
+            len(self.priors),
             cost0,
-            0.5 * float(np.sum(self.residuals(poses, (i, j, z, w)) ** 2)),
+            0.5 * float(np.sum(self.residuals(poses, arrays) ** 2)),
         )
         self._poses = [p for p in poses]
         return poses
+
+    def _system(self, poses: np.ndarray, arrays, robust: bool):
+        """The weighted errors (edges, then priors) and their sparse Jacobian, Huber
+        weighted when ``robust``."""
+        n = len(poses)
+        blocks, cols, errs = [], [], []
+        if arrays is not None:
+            i, j, z, w = arrays
+            r, Ji, Jj = _linearise(poses, i, j, z)
+            wr = np.einsum("kab,kb->ka", w, r)
+            Wi, Wj = np.einsum("kab,kbc->kac", w, Ji), np.einsum("kab,kbc->kac", w, Jj)
+            if robust:
+                h = _huber(wr)
+                wr, Wi, Wj = wr * h[:, None], Wi * h[:, None, None], Wj * h[:, None, None]
+            blocks += [Wi, Wj]
+            cols += [_cols(i), _cols(j)]
+            errs.append(wr)
+        if self.priors:
+            k, zp, wp = self._prior_arrays()
+            r = poses[k] - zp
+            r[:, 2] = wrap(r[:, 2])
+            wr, Wk = np.einsum("kab,kb->ka", wp, r), wp.copy()  # d(error)/d(pose) = I
+            if robust:
+                h = _huber(wr)
+                wr, Wk = wr * h[:, None], Wk * h[:, None, None]
+            blocks.append(Wk)
+            cols.append(_cols(k))
+            errs.append(wr)
+        e = np.concatenate(errs)
+        m = len(e)
+        rows = np.repeat(np.arange(3 * m).reshape(m, 3, 1), 3, axis=2).ravel()
+        m_edges = len(self.edges) if arrays is not None else 0
+        edge_rows = rows[: 9 * m_edges]
+        row_idx = [edge_rows, edge_rows] if arrays is not None else []
+        if self.priors:
+            row_idx.append(rows[9 * m_edges :])
+        J = scipy.sparse.csr_matrix(
+            (
+                np.concatenate([b.ravel() for b in blocks]),
+                (np.concatenate(row_idx), np.concatenate(cols)),
+            ),
+            shape=(3 * m, 3 * n),
+        )
+        return e.ravel(), J
+
+
+def _huber(wr: np.ndarray) -> np.ndarray:
+    """Square roots of the Huber weights, per edge, from its weighted error's norm."""
+    norm = np.linalg.norm(wr, axis=1)
+    return np.sqrt(np.minimum(1.0, HUBER_SCALE / np.maximum(norm, 1e-12)))
 
 
 def _cols(nodes: np.ndarray) -> np.ndarray:

@@ -52,7 +52,7 @@ from polyswarm.polymap import (
 from polyswarm.posegraph import PoseGraph
 from polyswarm.refine import refine_polygon
 from polyswarm.scan import LaserScan, scan_to_points
-from polyswarm.se2 import compose, relative, transform_points, wrap
+from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
 from polyswarm.submap import KeyframeStore
 from polyswarm.trim import trim_keyframe
 
@@ -183,6 +183,11 @@ class PolySlam:
         self._anchor: np.ndarray | None = None  # a frame to move into at the next scan
         self._anchor_base: int | None = None  # the map's version before that move
         self.anchors = 0  # frames moved into
+        # priors from the swarm's joint pose graph, applied at the next keyframe
+        self._priors: dict[int, np.ndarray] | None = None
+        self._prior_sigmas = (0.05, 0.01)  # metres, radians: replaced with the priors
+        self._optimise = False  # priors set: the graph is optimised in this keyframe step
+        self.priors_applied = 0
 
     def resume(
         self, pmap: GridPolyMap, pose, odom=None, scale: OdometryScale | None = None
@@ -243,6 +248,27 @@ class PolySlam:
         moved = transform_map(self.map, frame)
         self.map, _ = self.map.with_cells_of(moved, set(self.map.cells) | set(moved.cells))
 
+    def constrain(self, frames: dict[int, np.ndarray], sigma_m: float, sigma_rad: float) -> int:
+        """Priors from the swarm's joint pose graph (``polyswarm.jointgraph``): keyframe id
+        -> where the frame its polygon is held at (``polyswarm.follow``) belongs, in the
+        frame this SLAM is in. They replace earlier priors in the pose graph, which is
+        optimised at the next scan (made a keyframe); the map follows as after a loop
+        closure. Keyframes not held (a resumed map does not follow the graph) are left
+        out; the priors taken are counted."""
+        if not self._follows:
+            return 0
+        n = len(self.graph)
+        poses = {
+            kid: compose(np.asarray(p, dtype=float), inverse(self._frames[kid]))
+            for kid, p in frames.items()
+            if kid in self._frames and kid < n
+        }
+        if poses:
+            self._priors = poses
+            self._prior_sigmas = (sigma_m, sigma_rad)
+            self._keyframe_requested = True
+        return len(poses)
+
     def request_keyframe(self) -> None:
         """Make the next scan a keyframe (a robot that stopped to look at something)."""
         self._keyframe_requested = True
@@ -301,6 +327,8 @@ class PolySlam:
         # the scan also matches an old part of the map
         # (not in the step that moved into another frame: one correction per step)
         pose = self._add_to_graph(pose, res, valid, points.origin, anchor_base is None)
+        if self._optimise:  # priors set and no loop closure optimised the graph
+            pose = self._optimise_graph()
         t["loop"] = time.perf_counter()
         # 5. keyframe polygon, closed through the sensor centre
         kf = keyframe_polygon(
@@ -434,6 +462,11 @@ class PolySlam:
         (``loops``: look for one)."""
         lc = self.cfg.loop_closure
         node = self.graph.add_node(pose)
+        if loops and self._priors is not None:  # not in the step that moved frames
+            priors, self._priors = self._priors, None
+            self.graph.set_priors(priors, *self._prior_sigmas)
+            self._optimise = True
+            self.priors_applied += 1
         if node == 0:
             return pose
         prev = self.graph.poses[node - 1]
@@ -508,11 +541,17 @@ class PolySlam:
         turn = abs(float(wrap(m.pose[2] - pose[2])))
         if shift + turn * METRES_PER_RADIAN < lc.optimise_above_m:
             return pose  # the loop agrees with tracking: nothing to correct yet
+        log.debug("loop %d -> %d closed: moved %.3f m, %.2f deg", anchor, node, shift, turn)
+        return self._optimise_graph()
+
+    def _optimise_graph(self) -> np.ndarray:
+        """Optimise the pose graph, move the keyframes and the map with it (once per
+        keyframe step); the new keyframe's pose."""
+        self._optimise = False
         poses = self.graph.optimise()
         self.store.set_poses(poses[:-1])
         if self._follows:
             self._follow()
-        log.debug("loop %d -> %d closed: moved %.3f m, %.2f deg", anchor, node, shift, turn)
         return poses[-1]
 
     def _follow(self) -> None:

@@ -96,6 +96,9 @@ class SwarmKeys:
     def all_anchors(self) -> str:
         return f"{self.prefix}/coordinator/anchor/*"
 
+    def priors(self, robot_id: str) -> str:
+        return f"{self.prefix}/coordinator/priors/{check_name(robot_id, 'robot id')}"
+
     @property
     def merged_delta(self) -> str:
         return f"{self.prefix}/coordinator/map/delta"

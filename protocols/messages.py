@@ -440,6 +440,58 @@ class Anchor(Message):
         return a
 
 
+MAX_PRIORS = 4096  # keyframes one priors message may hold (12 bytes each, about 50 KB)
+MAX_PRIOR_MM = 10**8  # 100 km in millimetres
+
+
+@dataclass(frozen=True)
+class Priors(Message):
+    """The coordinator to a robot: where the swarm's joint pose graph
+    (``polyswarm.jointgraph``) puts some of its keyframes. ``poses``: (keyframe id, x,
+    y in millimetres, theta in 10 microradians) of the frame each keyframe's polygon is
+    held at (as in a correction), ids ascending; ``sigma_m``, ``sigma_rad``: their
+    standard deviations. They replace the robot's earlier priors; it holds them in its
+    pose graph and its map follows at its next keyframe, sent as a correction like any
+    other. ``frame``: the anchor the poses are in (0: the robot's start was given); a
+    robot in another frame ignores them, as it ignores keyframes it does not know."""
+
+    TYPE: ClassVar[str] = "priors"
+    frame: int
+    sigma_m: float
+    sigma_rad: float
+    poses: tuple[tuple[int, int, int, int], ...]
+
+    def body(self) -> dict:
+        return {
+            "frame": self.frame,
+            "sm": self.sigma_m,
+            "sr": self.sigma_rad,
+            "p": [list(p) for p in self.poses],
+        }
+
+    @classmethod
+    def from_body(cls, b: dict) -> Priors:
+        raw = b.get("p")
+        if not isinstance(raw, list) or len(raw) > MAX_PRIORS:
+            raise ProtocolError(f"field 'p': a list of at most {MAX_PRIORS} priors")
+        poses, last = [], -1
+        for item in raw:
+            if not isinstance(item, list) or len(item) != 4:
+                raise ProtocolError("field 'p': each prior is [keyframe, x, y, theta]")
+            kid = _int(item[0], "keyframe", last + 1, 2**31)
+            x = _int(item[1], "x", -MAX_PRIOR_MM, MAX_PRIOR_MM)
+            y = _int(item[2], "y", -MAX_PRIOR_MM, MAX_PRIOR_MM)
+            th = _int(item[3], "theta", -400_000, 400_000)  # within +-4 rad
+            poses.append((kid, x, y, th))
+            last = kid
+        return cls(
+            _int(b.get("frame"), "frame", 0),
+            _num(b.get("sm"), "sm", 1e-4, 100.0),
+            _num(b.get("sr"), "sr", 1e-6, 10.0),
+            tuple(poses),
+        )
+
+
 @dataclass(frozen=True)
 class CoordinatorStatus(Message):
     TYPE: ClassVar[str] = "coordinator-status"
@@ -613,6 +665,7 @@ TYPES: dict[str, type[Message]] = {
         RobotStatus,
         Assignment,
         Anchor,
+        Priors,
         CoordinatorStatus,
         Clock,
         Truth,

@@ -154,3 +154,31 @@ def test_a_withdrawn_frame_is_a_frame_of_its_own_until_the_next_anchor(tmp_path)
     assert "r3" not in agent.peers  # a peer whose frame was withdrawn: not planned around
     agent.on_peer_pose("r3", 0.9, Pose(4.0, 0.0, 0.0, frame=3))
     assert "r3" in agent.peers
+
+
+def test_priors_in_another_frame_or_for_keyframes_not_held_are_ignored():
+    """Joint pose graph priors apply only in the frame they were computed in, and only to
+    keyframes the robot holds; those it takes move its map at the next keyframe."""
+    from protocols.messages import Anchor, Priors
+
+    agent = RobotAgent("r2", Config(), (0.0, 0.0, 0.0))
+    for k in range(3):
+        agent.on_odom(0.1 * k, Odometry(0.0, 0.0, 0.0))
+        agent.on_scan(0.1 * k, room_scan(0.1 * k))
+    held = sorted(agent.slam.atlas.poses)
+    assert held
+    frame = agent.slam.atlas.poses[held[0]]
+    moved = (frame[0] + 100, frame[1], frame[2])  # 10 cm along x
+    assert agent.on_priors(Priors(1, 0.05, 0.01, ((held[0], *moved),))) == 0  # frame 1: not ours
+    assert agent.on_priors(Priors(0, 0.05, 0.01, ((10_000, *moved),))) == 0  # not held
+    version = agent.slam.map.version
+    assert agent.on_priors(Priors(0, 0.05, 0.01, ((held[0], *moved),))) == 1
+    agent.on_odom(0.5, Odometry(0.0, 0.0, 0.0))
+    out = agent.on_scan(0.5, room_scan(0.5))
+    assert agent.slam.priors_applied == 1 and agent.slam.map.version > version
+    assert out.pose is not None and out.pose.x > 0.05  # the robot's pose moved with its map
+    other = RobotAgent("r3", Config(), (0.0, 0.0, 0.0))
+    other.on_odom(0.0, Odometry(0.0, 0.0, 0.0))
+    other.on_scan(0.0, room_scan(0.0))
+    other.on_anchor(Anchor(1, 1.0, 0.0, 0.0))  # an anchor on its way: the frame changes
+    assert other.on_priors(Priors(0, 0.05, 0.01, ((0, *moved),))) == 0

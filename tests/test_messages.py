@@ -259,6 +259,30 @@ def test_a_pose_names_its_frame_only_once_anchored():
         decode(encode(Anchor(2, 1.0, 0.0, 0.0, own=True), "coordinator", 0, 0.0), Anchor)
 
 
+def test_priors_travel_whole_and_bad_ones_are_refused():
+    from protocols.messages import MAX_PRIORS, Priors
+
+    good = Priors(2, 0.05, 0.01, ((3, 1250, -400, 1745), (6, 1300, -410, -1800)))
+    _, back = decode(encode(good, "coordinator", 0, 0.0), Priors)
+    assert back == good
+    bad = [
+        Priors(2, 0.05, 0.01, ((6, 0, 0, 0), (3, 0, 0, 0))),  # ids must ascend
+        Priors(2, 0.05, 0.01, ((3, 0, 0, 0), (3, 0, 0, 0))),  # ... strictly
+        Priors(2, 0.05, 0.01, ((-1, 0, 0, 0),)),
+        Priors(2, 0.05, 0.01, ((1, 10**9, 0, 0),)),  # 1,000 km: not the same building
+        Priors(2, 0.05, 0.01, ((1, 0, 0, 500_000),)),  # 5 rad: not wrapped
+        Priors(2, 0.0, 0.01, ((1, 0, 0, 0),)),  # no standard deviation
+        Priors(-1, 0.05, 0.01, ((1, 0, 0, 0),)),
+        Priors(0, 0.05, 0.01, tuple((k, 0, 0, 0) for k in range(MAX_PRIORS + 1))),
+    ]
+    for msg in bad:
+        with pytest.raises(ProtocolError):
+            decode(encode(msg, "coordinator", 0, 0.0), Priors)
+    body = good.body() | {"p": [[3, 1.5, 0, 0]]}  # a float where millimetres go
+    with pytest.raises(ProtocolError):
+        Priors.from_body(body)
+
+
 def test_a_poses_clear_profile_travels_whole_or_is_refused():
     from polyswarm.sighting import SECTORS
     from protocols.messages import Pose

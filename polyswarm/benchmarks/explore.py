@@ -24,6 +24,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from polyswarm.config import Config
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +86,10 @@ def plan_runs(
     return runs
 
 
-def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float) -> dict:
+def run_exploration(
+    spec: RunSpec, out: Path, speed: float, wall_limit_s: float, base: Config | None = None
+) -> dict:
+    """One launch; ``base``: the config the profile applies on (default: the defaults)."""
     from polyswarm.config import Config, with_profile
     from polyswarm.runners.launch import LaunchOptions, launch
 
@@ -95,7 +102,7 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         wall_limit_s=wall_limit_s,
         stop_coverage=0.99,  # t99 is what is measured; returning home is not
         out=out,
-        config=with_profile(Config(), spec.profile),
+        config=with_profile(base or Config(), spec.profile),
         scatter=spec.start == "scattered",
         unknown_start=spec.start == "unknown",
         wrong_anchor=spec.wrong_anchor,
@@ -111,12 +118,14 @@ def run_exploration(spec: RunSpec, out: Path, speed: float, wall_limit_s: float)
         "wrong_anchor": spec.wrong_anchor,
         "anchors": m["anchors"],
         "anchor_events": m.get("anchor_events", []),
+        "pose_error_m": m.get("pose_error_m", {}),
         "unanchored": m["unanchored"],
         "t90_s": m["t90_s"],
         "t99_s": m["t99_s"],
         "final_coverage": m["final_coverage"],
         "unexplored_reachable_m2": m["unexplored_reachable_m2"],
         "map_iou": m["map_iou"],
+        "phantom_obstacle_m": m.get("phantom_obstacle_m"),
         "wall_collisions": m["collisions"]["walls"],
         "robot_collisions": m["collisions"]["robots"],
         "crashed_processes": m["crashed_processes"],
@@ -312,6 +321,7 @@ def run(
     profiles: tuple[str, ...] = ("thesis",),
     unknown_start: bool = False,
     wrong_anchor: str = "",
+    base: Config | None = None,
 ) -> dict:
     out = out or Path(tempfile.mkdtemp(prefix="polyswarm-bench-explore-"))
     runs = [
@@ -331,7 +341,7 @@ def run(
         name = f"{spec.profile}-{spec.world.replace(':', '_')}-{spec.robots}-{spec.strategy}"
         name += "" if spec.start == "side-by-side" else f"-{spec.start}"
         t0 = time.monotonic()
-        row = run_exploration(spec, out / f"{name}-{spec.seed}", speed, wall_limit_s)
+        row = run_exploration(spec, out / f"{name}-{spec.seed}", speed, wall_limit_s, base)
         row["reference_t99_s"] = references.get(key)
         log.info("%s: t99 %s s in %.0f s wall", spec, row["t99_s"], time.monotonic() - t0)
         rows.append(row)

@@ -440,6 +440,9 @@ def bench_explore(
         help="With --unknown-start, a fault injection in the runs not told: ROBOT's first "
         "frame sent DX m, DY m and DEG degrees off (ROBOT:DX,DY,DEG); merges undone counted.",
     ),
+    config: Path = typer.Option(
+        None, "--config", "-c", help="TOML config the runs start from (profiles apply on it)."
+    ),
 ) -> None:
     """Whole explorations (t99, success, IoU) against the idealised reference run for the
     same world, robots and profile, and the coordinator cycle under load.
@@ -450,11 +453,12 @@ def bench_explore(
 
     from agents.anchoring import wrong_anchor_fault
     from polyswarm.benchmarks import explore as eb
-    from polyswarm.config import Config, with_profile
+    from polyswarm.config import Config, load_config, with_profile
 
+    base = load_config(config) if config else Config()
     names = _names(profile)
     for name in names:
-        with_profile(Config(), name)  # an unknown profile fails here, before any run
+        with_profile(base, name)  # an unknown profile fails here, before any run
     wrong_anchor_fault(wrong_anchor)  # and a bad fault
     console = Console(stderr=True)
     with console.status("explorations") as status:
@@ -488,6 +492,7 @@ def bench_explore(
             names,
             unknown_start,
             wrong_anchor,
+            base,
         )
     _save(save, res)
     if as_json:

@@ -292,6 +292,28 @@ class Observer:
         self._frames[rid] = (a.frame, first)
         self.anchor_events.append(event)
 
+    def pose_errors(self) -> dict[str, dict]:
+        """Each robot's pose as it sent it against ground truth (the truth sample nearest
+        in time), over the poses it sent in the shared frame: median, 95th percentile
+        and last position error (metres)."""
+        out = {}
+        for rid, v in self.robots.items():
+            if not v.estimate or not v.truth:
+                continue
+            tt = np.array([t[0] for t in v.truth])
+            est = np.array(v.estimate)
+            k = np.clip(np.searchsorted(tt, est[:, 0]), 0, len(tt) - 1)
+            k0 = np.clip(k - 1, 0, len(tt) - 1)
+            k = np.where(np.abs(tt[k0] - est[:, 0]) < np.abs(tt[k] - est[:, 0]), k0, k)
+            truth = np.array([v.truth[i][1:3] for i in k])
+            err = np.hypot(*(est[:, 1:3] - truth).T)
+            out[rid] = {
+                "median": float(np.median(err)),
+                "p95": float(np.percentile(err, 95)),
+                "end": float(err[-1]),
+            }
+        return out
+
     def unplaced(self) -> list[str]:
         """Robots in frames of their own whose frames were not placed yet."""
         return sorted((self.own_frames & set(self.robots)) - set(self.anchors))
@@ -402,6 +424,8 @@ class Observer:
             "anchors": self.anchors,
             "unanchored": self.unplaced(),
             "anchor_events": self.anchor_events,  # every anchor and withdrawal, in order
+            # poses sent against ground truth, in the shared frame (metres)
+            "pose_error_m": self.pose_errors(),
             # resident memory of every process over the run (wall s, MB; an agent's row
             # also has its keyframes then, to tell memory that follows the map from a leak)
             "rss_mb_over_time": {

@@ -104,6 +104,7 @@ def golden_messages() -> list[tuple[str, object]]:
         MissionState,
         Odometry,
         Pose,
+        Priors,
         RobotState,
         RobotStatus,
         Scan,
@@ -121,6 +122,7 @@ def golden_messages() -> list[tuple[str, object]]:
             Assignment(AssignmentKind.EXPLORE, 5, (1.0, 2.0), ((0.0, 0.0), (1.0, 0.0)), 4.5, 11),
         ),
         ("anchor", Anchor(1, 12.5, -3.25, 2.0)),
+        ("priors", Priors(2, 0.05, 0.0087, ((3, 1250, -400, 1745), (6, 1300, -410, -1800)))),
         (
             "coordinator-status",
             CoordinatorStatus(MissionState.EXPLORING, ("r1", "r2"), 3, 11, 42.0, 12.5, 1000, 9.25),

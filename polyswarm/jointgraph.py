@@ -1,0 +1,332 @@
+"""The swarm's joint pose graph: robots correct each other, not only themselves.
+
+Each robot optimises its own pose graph; where two robots mapped the same walls, the
+coordinator knows better than either: it holds every robot's keyframe polygons (the
+merges it replays) at their current poses (the corrections it replays). This module
+builds one graph over all of them:
+
+* **nodes**: every keyframe of every robot in the shared frame, at the frame its
+  polygon is held at (``polyswarm.follow.frame_of``; the coordinator has no sensor
+  poses, and any frame fixed to the keyframe will do);
+* **chain edges**: each robot's consecutive keyframes as its own estimate places them,
+  soft (``CHAIN_SIGMA_*``): a robot's map is good locally and drifts over distance;
+* **inter-robot edges**: a keyframe's walls and those of its neighbours in time
+  (``WINDOW_KEYFRAMES``, within ``LOCAL_RADIUS_M``) aligned by point-to-line ICP on
+  another robot's walls nearby (``polyswarm.mapmatch.align_walls``), accepted when the
+  walls agree (``MIN_INLIERS``, ``MIN_INLIER_SHARE``), pin the pose in both directions
+  (``MIN_CONDITION``: not a corridor) and the fix is local (``MAX_FIX_*``: frames are
+  found by ``agents.anchoring`` first; this only refines them).
+
+The first keyframe of the reference robot (the one whose frame is the map's) is fixed;
+the others move where chain and inter-robot edges together put them (Huber loss: a
+wrong edge is down-weighted). The keyframes that inter-robot edges hold go back to their
+robots as *priors* (``solve``): each robot adds them to its own graph
+(``PoseGraph.set_priors``) and its map follows its graph as after a loop closure.
+
+    ledgers = {"r1": KeyframeLedger(), "r2": KeyframeLedger()}
+    ... ledgers[rid].merged(kid, polygon); ledgers[rid].corrected(moves) ...
+    joint = JointGraph()
+    joint.find_edges(ledgers)
+    priors = joint.solve(ledgers, reference="r1")   # robot -> keyframe -> pose
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from polyswarm.follow import QPose, frame_of, pose_of
+from polyswarm.mapmatch import INLIER_M, NORMAL_WEIGHT_M, Walls, align_walls, wall_points
+from polyswarm.polymap import TypedPolygon, VectorType
+from polyswarm.posegraph import PoseGraph
+from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
+
+log = logging.getLogger(__name__)
+
+# a keyframe is matched with the walls of its neighbours in time: a keyframe polygon is
+# trimmed to what it added to the map, often a few metres of wall
+WINDOW_KEYFRAMES = 6  # keyframes either side of it
+LOCAL_RADIUS_M = 5.0  # ... whose walls' centre lies this close to its own
+TARGET_MARGIN_M = 2.0  # the other robot's keyframes this much farther out are matched on
+KEYFRAME_STEP = 3  # every third keyframe is matched (its neighbours share its walls)
+MAX_TRIES = 4  # a keyframe that found no edge is tried again this often (the others map on)
+MIN_WALL_POINTS = 60  # 6 m of wall in the local view (points every 0.1 m)
+MIN_INLIERS = 50  # 5 m of it within INLIER_M of the other robot's walls after ICP
+MIN_INLIER_SHARE = 0.8  # of the local view's points near the other's walls (0.5 m)
+NEAR_M = 0.5
+# smaller over larger eigenvalue of the agreeing points' normals' scatter: walls in one
+# direction only (a corridor) leave the position along them to the odometry
+MIN_CONDITION = 0.1
+MAX_FIX_M = 1.0  # a fix farther than this is another place, not a refinement
+MAX_FIX_RAD = math.radians(5.0)
+EDGE_SIGMA_M = 0.05  # an inter-robot edge: the ICP's agreement (INLIER_M) and the maps' noise
+EDGE_SIGMA_RAD = math.radians(0.5)
+# a robot's own chain: 2 cm and 0.3 deg a keyframe, growing with the distance between
+# the frames (a heading error moves a frame far out)
+CHAIN_SIGMA_M = 0.02
+CHAIN_SIGMA_PER_M = 0.01
+CHAIN_SIGMA_RAD = math.radians(0.3)
+# priors are sent for a robot when the joint graph moves one of its held keyframes this
+# far (a turn counts at REACH_M, as corrections do)
+PRIOR_MOVE_M = 0.03
+REACH_M = 5.0
+PRIOR_SIGMA_M = EDGE_SIGMA_M
+PRIOR_SIGMA_RAD = EDGE_SIGMA_RAD
+
+
+@dataclass(frozen=True)
+class LedgerKeyframe:
+    frame: QPose  # where its polygon is held (wire units): moved by every correction
+    walls: Walls  # its obstacle vectors' wall points, in that frame's coordinates
+    centre: np.ndarray  # the mean of its wall points, in that frame's coordinates
+
+
+def _keyframe(polygon: TypedPolygon, frame: QPose) -> LedgerKeyframe:
+    s, e, t = polygon.segments()
+    keep = t == VectorType.OBSTACLE
+    w = wall_points(s[keep], e[keep])
+    back = inverse(pose_of(frame))
+    walls = transform_points(back, w.walls) if len(w.walls) else w.walls
+    c, sn = math.cos(back[2]), math.sin(back[2])
+    normals = w.normals @ np.array([[c, sn], [-sn, c]])
+    centre = walls.mean(axis=0) if len(walls) else np.zeros(2)
+    return LedgerKeyframe(frame, Walls(walls, normals), centre)
+
+
+class KeyframeLedger:
+    """A robot's keyframes as the coordinator replays them: each polygon's walls and the
+    frame it is held at now. Cheaper than an atlas (no cells), and kept beside it, so a
+    replay pool may hold the atlas in another process."""
+
+    def __init__(self) -> None:
+        self.keyframes: dict[int, LedgerKeyframe] = {}
+
+    def __len__(self) -> int:
+        return len(self.keyframes)
+
+    def merged(self, kid: int, polygon: TypedPolygon) -> None:
+        """A replayed merge of keyframe ``kid`` (held at ``frame_of`` its polygon)."""
+        self.keyframes[kid] = _keyframe(polygon, frame_of(polygon))
+
+    def corrected(self, moves) -> None:
+        """A replayed correction: (keyframe, step of its frame in wire units) pairs."""
+        for kid, (dx, dy, dth) in moves:
+            k = self.keyframes.get(kid)
+            if k is not None:
+                f = (k.frame[0] + dx, k.frame[1] + dy, k.frame[2] + dth)
+                self.keyframes[kid] = LedgerKeyframe(f, k.walls, k.centre)
+
+    @classmethod
+    def from_atlas(cls, atlas) -> KeyframeLedger:
+        """The ledger of a map handed over whole with its atlas (``polyswarm.follow``)."""
+        out = cls()
+        for kid, polygon in atlas.polygons.items():
+            out.keyframes[kid] = _keyframe(polygon, atlas.poses[kid])
+        return out
+
+    def snapshot(self) -> dict[int, LedgerKeyframe]:
+        """The keyframes now (entries are immutable: safe to read on another thread)."""
+        return dict(self.keyframes)
+
+
+@dataclass(frozen=True)
+class InterEdge:
+    a: tuple[str, int]  # the robot and keyframe whose walls were matched on
+    b: tuple[str, int]  # the robot and keyframe matched
+    z: np.ndarray  # b's frame seen from a's frame
+    inliers: int
+
+
+def _placed(k: LedgerKeyframe) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    p = pose_of(k.frame)
+    c, s = math.cos(p[2]), math.sin(p[2])
+    walls = transform_points(p, k.walls.walls) if len(k.walls.walls) else k.walls.walls
+    return (
+        walls,
+        k.walls.normals @ np.array([[c, s], [-s, c]]),
+        transform_points(p, k.centre[None])[0],
+    )
+
+
+def _centres(kfs: dict[int, LedgerKeyframe]) -> tuple[np.ndarray, np.ndarray]:
+    ids = np.array(sorted(kfs), dtype=int)
+    xy = np.array([_placed(kfs[k])[2] for k in ids]).reshape(-1, 2)
+    return ids, xy
+
+
+def _gather(kfs: dict[int, LedgerKeyframe], ids) -> Walls:
+    parts = [_placed(kfs[k]) for k in ids]
+    parts = [p for p in parts if len(p[0])]
+    if not parts:
+        return Walls(np.zeros((0, 2)), np.zeros((0, 2)))
+    return Walls(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+
+
+def match_keyframe(
+    mine: dict[int, LedgerKeyframe],
+    kid: int,
+    theirs: dict[int, LedgerKeyframe],
+    their_centres: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[int, np.ndarray, int] | None:
+    """Keyframe ``kid``'s local view (its walls and its neighbours', placed where they
+    are) on another robot's walls nearby: (their keyframe nearest it, ``kid``'s frame
+    seen from that keyframe's frame, agreeing wall points), or None when the walls do
+    not pin it down (see the module)."""
+    ids, xy = _centres(mine)
+    centre = _placed(mine[kid])[2]
+    near_t = (np.abs(ids - kid) <= WINDOW_KEYFRAMES) & (
+        np.hypot(*(xy - centre).T) <= LOCAL_RADIUS_M
+    )
+    local = _gather(mine, ids[near_t])
+    if len(local.walls) < MIN_WALL_POINTS:
+        return None
+    t_ids, t_xy = their_centres if their_centres is not None else _centres(theirs)
+    d = np.hypot(*(t_xy - centre).T) if len(t_ids) else np.zeros(0)
+    near = t_ids[d <= LOCAL_RADIUS_M + TARGET_MARGIN_M]
+    if len(near) == 0:
+        return None
+    target = _gather(theirs, near)
+    if len(target.walls) < MIN_WALL_POINTS:
+        return None
+    fix = align_walls(target, local, np.zeros(3))
+    if math.hypot(fix[0], fix[1]) > MAX_FIX_M or abs(wrap(fix[2])) > MAX_FIX_RAD:
+        return None
+    inliers, share, condition = _agreement(target, local, fix)
+    if inliers < MIN_INLIERS or share < MIN_INLIER_SHARE or condition < MIN_CONDITION:
+        return None
+    a_kid = int(near[np.argmin(d[d <= LOCAL_RADIUS_M + TARGET_MARGIN_M])])
+    b_now = pose_of(mine[kid].frame)
+    z = relative(pose_of(theirs[a_kid].frame), compose(fix, b_now))
+    return a_kid, z, inliers
+
+
+def _agreement(target: Walls, local: Walls, fix: np.ndarray) -> tuple[int, float, float]:
+    """After ``fix``: the local points within ``INLIER_M`` of a same-facing wall of the
+    target, their share of the points within ``NEAR_M`` of one, and the condition of
+    their normals (1: walls in all directions, 0: all parallel)."""
+    c, s = math.cos(fix[2]), math.sin(fix[2])
+    q = transform_points(fix, local.walls)
+    nq = local.normals @ np.array([[c, s], [-s, c]])
+    tree = cKDTree(np.hstack([target.walls, NORMAL_WEIGHT_M * target.normals]))
+    d, _ = tree.query(np.hstack([q, NORMAL_WEIGHT_M * nq]), distance_upper_bound=NEAR_M)
+    near = np.isfinite(d)
+    good = d <= INLIER_M
+    if good.sum() < 2:
+        return int(good.sum()), 0.0, 0.0
+    n = nq[good]
+    ev = np.linalg.eigvalsh(n.T @ n)
+    return int(good.sum()), float(good.sum() / max(near.sum(), 1)), float(ev[0] / max(ev[1], 1e-12))
+
+
+@dataclass
+class JointGraph:
+    """Inter-robot edges found so far (kept: an edge joins two rigid keyframes, whatever
+    their poses become) and the solve over all robots' keyframes."""
+
+    edges: dict[tuple[str, int], InterEdge] = field(default_factory=dict)
+    tries: dict[tuple[str, int], int] = field(default_factory=dict)
+
+    def find_edges(self, ledgers: dict[str, dict[int, LedgerKeyframe]]) -> int:
+        """Match every ``KEYFRAME_STEP``-th keyframe of each robot without an edge (at
+        most ``MAX_TRIES`` times) on each robot before it in name order; the edges found."""
+        found = 0
+        names = sorted(ledgers)
+        centres = {r: _centres(ledgers[r]) for r in names}
+        for bi, b in enumerate(names):
+            mine = ledgers[b]
+            for kid in sorted(mine):
+                key = (b, kid)
+                if kid % KEYFRAME_STEP or key in self.edges or self.tries.get(key, 0) >= MAX_TRIES:
+                    continue
+                tried = False
+                for a in names[:bi]:
+                    if not ledgers[a] or not _close_to(centres[a][1], _placed(mine[kid])[2]):
+                        continue
+                    tried = True
+                    hit = match_keyframe(mine, kid, ledgers[a], centres[a])
+                    if hit is not None:
+                        a_kid, z, n = hit
+                        self.edges[key] = InterEdge((a, a_kid), key, z, n)
+                        found += 1
+                        break
+                if tried and key not in self.edges:
+                    self.tries[key] = self.tries.get(key, 0) + 1
+        return found
+
+    def solve(
+        self, ledgers: dict[str, dict[int, LedgerKeyframe]], reference: str
+    ) -> dict[str, dict[int, np.ndarray]]:
+        """Every keyframe that an inter-robot edge holds, at its pose in the joint
+        solution (frame poses, metres and radians), per robot; robots joined to the
+        reference by no edge are left out."""
+        edges = [
+            e
+            for e in self.edges.values()
+            if e.a[1] in ledgers.get(e.a[0], {}) and e.b[1] in ledgers.get(e.b[0], {})
+        ]
+        robots = _joined(reference, edges, ledgers)
+        if len(robots) < 2:
+            return {}
+        g, node = PoseGraph(), {}
+        for r in [reference, *sorted(robots - {reference})]:  # node 0: the reference's first
+            for kid in sorted(ledgers[r]):
+                node[(r, kid)] = g.add_node(pose_of(ledgers[r][kid].frame))
+        for r in robots:
+            kids = sorted(ledgers[r])
+            for k0, k1 in itertools.pairwise(kids):
+                p0, p1 = pose_of(ledgers[r][k0].frame), pose_of(ledgers[r][k1].frame)
+                z = relative(p0, p1)
+                far = float(np.hypot(*z[:2]))
+                g.add_edge(
+                    node[(r, k0)],
+                    node[(r, k1)],
+                    z,
+                    CHAIN_SIGMA_M + CHAIN_SIGMA_PER_M * far,
+                    CHAIN_SIGMA_RAD,
+                )
+        for e in edges:
+            if e.a[0] in robots and e.b[0] in robots:
+                g.add_edge(node[e.a], node[e.b], e.z, EDGE_SIGMA_M, EDGE_SIGMA_RAD, loop=True)
+        poses = g.optimise()
+        held = {e.a for e in edges} | {e.b for e in edges}
+        out: dict[str, dict[int, np.ndarray]] = {}
+        for (r, kid), n in node.items():
+            if (r, kid) in held:
+                out.setdefault(r, {})[kid] = poses[n]
+        return out
+
+
+def moved_m(ledger: dict[int, LedgerKeyframe], poses: dict[int, np.ndarray]) -> float:
+    """How far ``poses`` move the farthest-moved keyframe (a turn counts at ``REACH_M``)."""
+    out = 0.0
+    for kid, p in poses.items():
+        now = pose_of(ledger[kid].frame)
+        d = math.hypot(*(p[:2] - now[:2])) + REACH_M * abs(float(wrap(p[2] - now[2])))
+        out = max(out, d)
+    return out
+
+
+def _close_to(xy: np.ndarray, point: np.ndarray) -> bool:
+    return bool(len(xy)) and bool(
+        (np.hypot(*(xy - point).T) <= LOCAL_RADIUS_M + TARGET_MARGIN_M).any()
+    )
+
+
+def _joined(reference: str, edges: list[InterEdge], ledgers) -> set[str]:
+    """The robots an inter-robot edge joins to the reference, directly or through others."""
+    if reference not in ledgers or not ledgers[reference]:
+        return set()
+    out, grew = {reference}, True
+    while grew:
+        grew = False
+        for e in edges:
+            ra, rb = e.a[0], e.b[0]
+            if (ra in out) != (rb in out):
+                out |= {ra, rb}
+                grew = True
+    return out
