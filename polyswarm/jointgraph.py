@@ -142,29 +142,33 @@ class InterEdge:
     inliers: int
 
 
-def _placed(k: LedgerKeyframe) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _placed(k: LedgerKeyframe) -> Walls:
+    """A keyframe's wall points and normals where its frame is now."""
     p = pose_of(k.frame)
+    if not len(k.walls.walls):
+        return k.walls
     c, s = math.cos(p[2]), math.sin(p[2])
-    walls = transform_points(p, k.walls.walls) if len(k.walls.walls) else k.walls.walls
-    return (
-        walls,
-        k.walls.normals @ np.array([[c, s], [-s, c]]),
-        transform_points(p, k.centre[None])[0],
-    )
+    return Walls(transform_points(p, k.walls.walls), k.walls.normals @ np.array([[c, s], [-s, c]]))
+
+
+def _centre(k: LedgerKeyframe) -> np.ndarray:
+    return transform_points(pose_of(k.frame), k.centre[None])[0]
 
 
 def _centres(kfs: dict[int, LedgerKeyframe]) -> tuple[np.ndarray, np.ndarray]:
+    """Keyframe ids (ascending) and where their walls' centres are now."""
     ids = np.array(sorted(kfs), dtype=int)
-    xy = np.array([_placed(kfs[k])[2] for k in ids]).reshape(-1, 2)
+    xy = np.array([_centre(kfs[k]) for k in ids]).reshape(-1, 2)
     return ids, xy
 
 
 def _gather(kfs: dict[int, LedgerKeyframe], ids) -> Walls:
-    parts = [_placed(kfs[k]) for k in ids]
-    parts = [p for p in parts if len(p[0])]
+    parts = [w for w in (_placed(kfs[k]) for k in ids) if len(w.walls)]
     if not parts:
         return Walls(np.zeros((0, 2)), np.zeros((0, 2)))
-    return Walls(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+    return Walls(
+        np.concatenate([w.walls for w in parts]), np.concatenate([w.normals for w in parts])
+    )
 
 
 def match_keyframe(
@@ -172,13 +176,14 @@ def match_keyframe(
     kid: int,
     theirs: dict[int, LedgerKeyframe],
     their_centres: tuple[np.ndarray, np.ndarray] | None = None,
+    my_centres: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[int, np.ndarray, int] | None:
     """Keyframe ``kid``'s local view (its walls and its neighbours', placed where they
     are) on another robot's walls nearby: (their keyframe nearest it, ``kid``'s frame
     seen from that keyframe's frame, agreeing wall points), or None when the walls do
     not pin it down (see the module)."""
-    ids, xy = _centres(mine)
-    centre = _placed(mine[kid])[2]
+    ids, xy = my_centres if my_centres is not None else _centres(mine)
+    centre = _centre(mine[kid])
     near_t = (np.abs(ids - kid) <= WINDOW_KEYFRAMES) & (
         np.hypot(*(xy - centre).T) <= LOCAL_RADIUS_M
     )
@@ -245,10 +250,10 @@ class JointGraph:
                     continue
                 tried = False
                 for a in names[:bi]:
-                    if not ledgers[a] or not _close_to(centres[a][1], _placed(mine[kid])[2]):
+                    if not ledgers[a] or not _close_to(centres[a][1], _centre(mine[kid])):
                         continue
                     tried = True
-                    hit = match_keyframe(mine, kid, ledgers[a], centres[a])
+                    hit = match_keyframe(mine, kid, ledgers[a], centres[a], centres[b])
                     if hit is not None:
                         a_kid, z, n = hit
                         self.edges[key] = InterEdge((a, a_kid), key, z, n)

@@ -108,9 +108,11 @@ def test_unknown_starts_are_compared_with_the_same_starts_told():
             row(0, "scattered", 100.0, {}),
             row(0, "unknown", 120.0, good),
             row(1, "scattered", 100.0, {}),
-            row(1, "unknown", 150.0, wrong, ["r3"]),
+            row(1, "unknown", 150.0, wrong, ["r3"])
+            | {"pose_error_m": {"r1": {"median": 0.1, "p95": 0.2, "end": 0.1}}},
         ]
     )["thesis"]["office"]["3"]
+    assert res["pose_err_m_p95_max"] == 0.2
     assert res["wrong_merges"] == 1 and not res["all_anchored"]
     assert res["t99_ratio_median"] == 1.35 and res["t99_ratio_worst"] == 1.5
     assert res["frame_err_m_max"] == 4.0

@@ -285,6 +285,21 @@ def summarise_unknown(rows: list[dict]) -> dict:
                     if not e["own"]
                 ),
                 "undone": sum(e["own"] for e in r.get("anchor_events", [])),
+                # the robots' poses in the shared frame against ground truth: the worst
+                # robot's median and 95th percentile (metres)
+                "pose_err_m_median": max(
+                    (e["median"] for e in r.get("pose_error_m", {}).values()), default=None
+                ),
+                "pose_err_m_p95": max(
+                    (e["p95"] for e in r.get("pose_error_m", {}).values()), default=None
+                ),
+                "told_pose_err_m_p95": max(
+                    (e["p95"] for e in base.get("pose_error_m", {}).values()), default=None
+                )
+                if base
+                else None,
+                "map_iou": r.get("map_iou"),
+                "told_map_iou": base.get("map_iou") if base else None,
             }
         )
     res = {}
@@ -302,6 +317,10 @@ def summarise_unknown(rows: list[dict]) -> dict:
             "frame_err_deg_max": max((x["frame_err_deg_max"] or 0.0 for x in runs), default=None),
             "t99_ratio_median": _median_or_none(ratios),
             "t99_ratio_worst": None if any(x is None for x in ratios) else max(ratios),
+            "pose_err_m_p95_max": max(
+                (x["pose_err_m_p95"] for x in runs if x["pose_err_m_p95"] is not None),
+                default=None,
+            ),
         }
     return res
 

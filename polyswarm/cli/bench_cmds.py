@@ -861,7 +861,8 @@ def _unknown_table(res: dict, seeds: int) -> None:
 
     t = Table(title=f"Unknown starts against the same starts told, {seeds} seed(s)")
     cols = ("profile", "world", "robots", "success", "all anchored", "wrong merges left")
-    for col in (*cols, "wrong sent, undone", "frame err max", "t99 ratio median", "worst"):
+    more = ("wrong sent, undone", "frame err max", "pose err p95 max", "t99 ratio median", "worst")
+    for col in (*cols, *more):
         t.add_column(col, justify="right")
     for prof, ws in res.items():
         for w, by_n in ws.items():
@@ -876,6 +877,7 @@ def _unknown_table(res: dict, seeds: int) -> None:
                     str(d["wrong_merges"]),
                     f"{d['wrong_frames_sent']}, {d['merges_undone']}",
                     "-" if err is None else f"{err:.3f} m, {d['frame_err_deg_max']:.2f} deg",
+                    "-" if d["pose_err_m_p95_max"] is None else f"{d['pose_err_m_p95_max']:.3f} m",
                     "-" if d["t99_ratio_median"] is None else f"{d['t99_ratio_median']:.2f}",
                     "-" if d["t99_ratio_worst"] is None else f"{d['t99_ratio_worst']:.2f}",
                 )
