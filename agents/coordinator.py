@@ -571,6 +571,8 @@ class Coordinator:
         self._pending.pop(rid, None)
         if info.map is not None:
             self._rebuild |= set(info.map.cells)
+        if self.pool is not None:  # its worker journals its copy aside (persist)
+            self.pool.drop(rid)
         self._wake = True
         log.warning("robot %s withdrawn from the merged map", rid)
         return info
@@ -1244,6 +1246,8 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 coord.frames_pending = tuple(anchoring.waiting)
                 now = max([coord.now, *(s.now for s in anchoring.coordinators())])
                 for rid, anchor in anchoring.tick(coord, now):
+                    if anchor.own and coord.pool is None:  # withdrawn: journaled aside
+                        persist.record(journal, "robot_withdrawn", rid)
                     coord.bytes_sent += bus.publish(keys.anchor(rid), anchor, now, reliable=True)
                 for rid, priors in joint.tick(coord, now, set(anchoring.audits)) if joint else []:
                     coord.bytes_sent += bus.publish(keys.priors(rid), priors, now, reliable=True)

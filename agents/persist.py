@@ -264,6 +264,19 @@ class CoordinatorJournal:
         """A robot's full map replaced the coordinator's copy (a resync)."""
         self._record(self.robots_dir / f"{robot_id}.polymap", None, pmap)
 
+    def robot_withdrawn(self, robot_id: str) -> None:
+        """A robot's copy left the merged map (its frame was found wrong,
+        ``agents.anchoring``): its snapshot and journal move to ``withdrawn/`` (kept, not
+        restored: a restarted coordinator must not merge it again)."""
+        snapshot = self.robots_dir / f"{robot_id}.polymap"
+        aside = self.robots_dir / "withdrawn"
+        aside.mkdir(parents=True, exist_ok=True)
+        n = len(list(aside.glob(f"{robot_id}-*.polymap")))
+        for src in (snapshot, snapshot.with_suffix(".journal")):
+            if src.exists():
+                os.replace(src, aside / f"{robot_id}-{n}{src.suffix}")
+        self._journaled.pop(snapshot, None)
+
     def _record(self, snapshot: Path, delta_bytes: bytes | None, pmap: GridPolyMap) -> None:
         n = self._journaled.get(snapshot, 0)
         if delta_bytes is None or n >= SNAPSHOT_EVERY or not snapshot.exists():

@@ -103,6 +103,11 @@ def _worker(inbox, results: Connection, state_dir: str | None) -> None:
     journal = persist.CoordinatorJournal(state_dir) if state_dir else None
     while (raw := receive(inbox)) is not None:
         msg = pickle.loads(raw)
+        if msg[0] == "drop":  # the robot left the merged map: its copy is journaled aside
+            maps.pop(msg[1], None)
+            atlases.pop(msg[1], None)
+            persist.record(journal, "robot_withdrawn", msg[1])
+            continue
         if msg[0] == "set":
             _, rid, epoch, pmap, atlas = msg
             maps[rid] = pmap
@@ -215,6 +220,10 @@ class ReplayPool:
 
     def set_map(self, rid: str, epoch: int, pmap: GridPolyMap | None, atlas: Atlas | None):
         self._send(rid, ("set", rid, epoch, pmap, atlas))
+
+    def drop(self, rid: str) -> None:
+        """Forget a robot's copy (after the updates sent before), its journal set aside."""
+        self._send(rid, ("drop", rid))
 
     def _send(self, rid: str, msg: tuple) -> None:
         # pickled here, not on the queue's feeder thread, where a failure would only print

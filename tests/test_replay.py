@@ -180,6 +180,32 @@ def test_workers_journal_the_robots_copies_for_a_restarted_coordinator(tmp_path)
     assert same(robots["r1"], robot1) and same(robots["r2"], robot2)
 
 
+def test_a_withdrawn_robots_copy_is_journaled_aside_not_restored(tmp_path):
+    """A robot withdrawn from the merged map (its frame found wrong): a restarted
+    coordinator must not merge its copy again; the copy stays on disk, set aside."""
+    c = Coordinator(Config(), {"r1": (1.0, 1.0, 0.0), "r2": (1.0, 11.0, 0.0)})
+    with c.use_pool(ReplayPool(1, str(tmp_path))):
+        robot1, ops = ops_of(POLYS)
+        for op in ops:
+            c.on_robot_merge("r1", 0.1, op)
+        robot2, ops2 = ops_of([shifted(r, 10.0) for r in RECTS[:3]])
+        for op in ops2:
+            c.on_robot_merge("r2", 0.1, op)
+        settle(c)
+        c.withdraw("r2")
+        settle(c)
+        for _ in range(50):  # the worker sets the journal aside after its updates
+            if not (tmp_path / "coordinator-robots" / "r2.polymap").exists():
+                break
+            time.sleep(0.05)
+    _, robots = persist.load_coordinator(tmp_path)
+    assert set(robots) == {"r1"} and same(robots["r1"], robot1)
+    aside = persist.load_map(tmp_path / "coordinator-robots" / "withdrawn" / "r2-0.polymap")
+    assert aside is not None  # nothing it mapped is lost
+    j = tmp_path / "coordinator-robots" / "withdrawn" / "r2-0.journal"
+    assert same(persist._replay_journal(j, aside), robot2)
+
+
 def test_workers_of_a_killed_coordinator_stop_themselves():
     """SIGKILL of the coordinator's process leaves no replay or merge process behind."""
     import subprocess
