@@ -152,3 +152,36 @@ def test_two_simulated_robots_correct_the_one_placed_off_through_the_wire():
     for rid, slam in zip(("r1", "r2"), slams, strict=True):
         copy = coord.robot(rid).map
         assert cells_digest(copy.cells.values()) == cells_digest(slam.map.cells.values())
+
+
+def test_the_coordinator_sends_priors_in_the_frame_each_robot_speaks_in():
+    """``agents.joint``: the solve runs on a thread of its own; the robot whose keyframes
+    it moves gets priors naming the anchor its poses name; the reference does not."""
+    import time
+
+    from agents.coordinator import Coordinator
+    from agents.joint import JointCorrections
+    from polyswarm.config import Config
+    from polyswarm.polymap import GridPolyMap
+
+    coord = Coordinator(Config(), {"r1": (0.0, 0.0, 0.0)})
+    for rid, pose in (("r1", (0, 0, 0)), ("r2", OFF)):
+        info = coord.robot(rid)
+        info.ledger, info.map = _ledger(pose), GridPolyMap(2.0)
+    coord.robot("r2").frame = 3  # anchored three times
+    joint = JointCorrections()
+    try:
+        assert joint.tick(coord, 0.0, {"r2"}) == []  # started
+        for _ in range(100):
+            out = joint.tick(coord, 1.0, {"r2"})
+            if out:
+                break
+            time.sleep(0.05)
+    finally:
+        joint.close()
+    assert [rid for rid, _ in out] == ["r2"]
+    priors = out[0][1]
+    assert priors.frame == 3 and [p[0] for p in priors.poses] == [0, 3, 6]
+    kid, x, y, th = priors.poses[1]
+    truth = _truth(_ledger(OFF), kid)
+    assert abs(x / 1000 - truth[0]) < 0.02 and abs(y / 1000 - truth[1]) < 0.02
