@@ -185,3 +185,4 @@ def test_the_coordinator_sends_priors_in_the_frame_each_robot_speaks_in():
     kid, x, y, th = priors.poses[1]
     truth = _truth(_ledger(OFF), kid)
     assert abs(x / 1000 - truth[0]) < 0.02 and abs(y / 1000 - truth[1]) < 0.02
+    assert abs(th / 100_000 - truth[2]) < math.radians(0.1)
