@@ -116,3 +116,5 @@ def test_unknown_starts_are_compared_with_the_same_starts_told():
     assert res["wrong_merges"] == 1 and not res["all_anchored"]
     assert res["t99_ratio_median"] == 1.35 and res["t99_ratio_worst"] == 1.5
     assert res["frame_err_m_max"] == 4.0
+    nobody = summarise_unknown([row(0, "scattered", 100.0, {}), row(0, "unknown", 120.0, {})])
+    assert nobody["thesis"]["office"]["3"]["frame_err_m_max"] is None  # not 0 m

@@ -313,8 +313,9 @@ def summarise_unknown(rows: list[dict]) -> dict:
             "wrong_merges": sum(x["wrong"] for x in runs),
             "wrong_frames_sent": sum(x["wrong_sent"] for x in runs),
             "merges_undone": sum(x["undone"] for x in runs),
-            "frame_err_m_max": max((x["frame_err_m_max"] or 0.0 for x in runs), default=None),
-            "frame_err_deg_max": max((x["frame_err_deg_max"] or 0.0 for x in runs), default=None),
+            # None where no robot was placed in any run (not 0 m)
+            "frame_err_m_max": _max_or_none(x["frame_err_m_max"] for x in runs),
+            "frame_err_deg_max": _max_or_none(x["frame_err_deg_max"] for x in runs),
             "t99_ratio_median": _median_or_none(ratios),
             "t99_ratio_worst": None if any(x is None for x in ratios) else max(ratios),
             "pose_err_m_p95_max": max(
@@ -323,6 +324,10 @@ def summarise_unknown(rows: list[dict]) -> dict:
             ),
         }
     return res
+
+
+def _max_or_none(values) -> float | None:
+    return max((v for v in values if v is not None), default=None)
 
 
 def run(
