@@ -267,6 +267,7 @@ class RobotAgent:
         poses (all in the shared frame) are dropped."""
         log.warning("%s: anchor %d: the shared frame is withdrawn", self.id, a.frame)
         self.frame, self.own_frame = a.frame, True
+        self.slam.clear_priors()  # the swarm's joint pose graph placed it in that frame
         self.behaviour.on_assignment(Assignment(AssignmentKind.STOP, -1), self._now_s, self.pose)
         self.peers.clear()
         self.merged = self.merged_graph = None

@@ -69,8 +69,10 @@ class PoseGraph:
 
     def move_all(self, frame) -> None:
         """Every node moved by ``frame`` (x m, y m, theta rad): the graph now lives in the
-        frame in which its old frame lies at ``frame``. Edges are relative: unchanged."""
+        frame in which its old frame lies at ``frame``. Edges are relative: unchanged;
+        priors move with the nodes."""
         self._poses = [compose(frame, p) for p in self._poses]
+        self.priors = {k: (compose(frame, p), w) for k, (p, w) in self.priors.items()}
 
     def add_node(self, pose) -> int:
         self._poses.append(np.array(pose, dtype=float))

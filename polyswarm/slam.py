@@ -269,6 +269,12 @@ class PolySlam:
             self._keyframe_requested = True
         return len(poses)
 
+    def clear_priors(self) -> None:
+        """Forget the joint pose graph's priors (the frame they were given in was
+        withdrawn); the graph keeps the poses they gave."""
+        self._priors = None
+        self.graph.priors = {}
+
     def request_keyframe(self) -> None:
         """Make the next scan a keyframe (a robot that stopped to look at something)."""
         self._keyframe_requested = True

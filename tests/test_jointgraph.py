@@ -91,6 +91,9 @@ def test_priors_hold_the_frame_and_move_node_zero():
     poses = g.optimise()
     assert np.allclose(poses[1], (3.0, 1.0, 0.0), atol=1e-3)
     assert np.allclose(poses[0], (2.0, 1.0, 0.0), atol=1e-3)
+    g.move_all((0.0, 0.0, math.pi / 2))  # anchored into another frame: priors move along
+    poses = g.optimise()
+    assert np.allclose(poses[1], (-1.0, 3.0, math.pi / 2), atol=1e-3)
 
 
 def test_two_simulated_robots_correct_the_one_placed_off_through_the_wire():
