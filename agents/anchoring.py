@@ -97,7 +97,7 @@ UNDO_AUDITS = 2
 WRONG_ANCHOR_ENV = "POLYSWARM_WRONG_ANCHOR"
 
 
-def wrong_anchor_fault(text: str) -> tuple[str, np.ndarray] | None:
+def robot_offset(text: str, what: str = "wrong anchor") -> tuple[str, np.ndarray] | None:
     """``r2:dx,dy,deg`` -> ("r2", offset (m, m, rad)); "" -> None."""
     if not text:
         return None
@@ -105,10 +105,15 @@ def wrong_anchor_fault(text: str) -> tuple[str, np.ndarray] | None:
         rid, rest = text.split(":", 1)
         dx, dy, deg = (float(v) for v in rest.split(","))
     except ValueError:
-        raise PolyswarmError(f"wrong anchor {text!r}: expected ROBOT:dx,dy,deg") from None
+        raise PolyswarmError(f"{what} {text!r}: expected ROBOT:dx,dy,deg") from None
     if not all(math.isfinite(v) for v in (dx, dy, deg)):
-        raise PolyswarmError(f"wrong anchor {text!r}: not finite")
+        raise PolyswarmError(f"{what} {text!r}: not finite")
     return rid, np.array([dx, dy, math.radians(deg)])
+
+
+def wrong_anchor_fault(text: str) -> tuple[str, np.ndarray] | None:
+    """``r2:dx,dy,deg`` -> ("r2", offset (m, m, rad)); "" -> None."""
+    return robot_offset(text, "wrong anchor")
 
 
 @dataclass

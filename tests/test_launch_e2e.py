@@ -168,3 +168,29 @@ def test_observer_clips_the_mazes_ground_truth_cell_by_cell(tmp_path):
     )
     assert abs(total - free.area) < 1e-6 * free.area
     assert shapely.is_valid(free)
+
+
+def test_a_start_told_off_is_told_so_and_the_robot_stands_where_it_really_is(tmp_path):
+    """``launch --start-error r2:DX,DY,DEG``: the swarm is told r2's start that far off
+    (in its start's axes); the simulator and the observer keep the true starts."""
+    import math
+
+    import numpy as np
+    import pytest
+
+    from polyswarm.errors import PolyswarmError
+    from polyswarm.runners.launch import LaunchOptions, Observer, prepare
+    from polyswarm.se2 import compose
+
+    world, cfg, _ = prepare(
+        LaunchOptions(world="office", robots=3, out=tmp_path / "a", start_error="r2:0.3,-0.2,3")
+    )
+    true = [np.array(p) for p in cfg.sim.start_poses]
+    told = [np.array(r.start) for r in cfg.robots]
+    assert np.allclose(told[0], true[0]) and np.allclose(told[2], true[2])
+    assert np.allclose(told[1], compose(true[1], (0.3, -0.2, math.radians(3))))
+    obs = Observer(world, cfg, [r.id for r in cfg.robots])
+    assert np.allclose(obs.to_map, 0.0)  # the map frame is the world's: told starts are in it
+    for bad in ("r9:0.3,0,0", "r2:0.3", "r2:nan,0,0"):
+        with pytest.raises(PolyswarmError):  # ConfigError among them
+            prepare(LaunchOptions(world="office", robots=3, out=tmp_path / "b", start_error=bad))

@@ -281,6 +281,12 @@ def launch_cmd(
         "DY metres and DEG degrees off (ROBOT:DX,DY,DEG, e.g. r2:2,1,20); its merge is undone "
         "once the robots' sightings contradict it.",
     ),
+    start_error: str = typer.Option(
+        "",
+        help="Tell the swarm ROBOT's start DX metres, DY metres and DEG degrees off where it "
+        "stands (ROBOT:DX,DY,DEG, e.g. r2:0.3,-0.2,3): a start measured badly; the joint pose "
+        "graph pulls its map onto the others'.",
+    ),
     restart: bool = typer.Option(
         True,
         help="Restart a process that exits unexpectedly, with backoff, as systemd would on a "
@@ -321,9 +327,10 @@ def launch_cmd(
     from agents.session import LinkFaults, stop_on_signals
 
     LinkFaults.parse(link_faults)  # a bad specification fails here, not in the children
-    from agents.anchoring import wrong_anchor_fault
+    from agents.anchoring import robot_offset, wrong_anchor_fault
 
     wrong_anchor_fault(wrong_anchor)
+    robot_offset(start_error, "start error")
     opts = LaunchOptions(
         world,
         robots,
@@ -342,6 +349,7 @@ def launch_cmd(
         view_port=view_port,
         restart=restart,
         unknown_start=unknown_start,
+        start_error=start_error,
     )
     console = Console(stderr=True)
     if view_port is not None:

@@ -136,6 +136,9 @@ class LaunchOptions:
     faults: tuple[Fault, ...] = ()  # fault injection (tests of reliability)
     link_faults: str = ""  # message loss/duplication/reordering at coordinator and agents
     wrong_anchor: str = ""  # ROBOT:dx,dy,deg: its first frame committed that far off (a fault)
+    # ROBOT:dx,dy,deg: its start told that far off where it stands (m, m, deg, in its
+    # start's axes): a start measured badly
+    start_error: str = ""
     # niceness of the simulator and agent processes: on one computer they stand for the
     # robots' own computers, and ten of them must not starve the coordinator and router
     # (the fleet's shared machine); 0 runs everything at the same priority
@@ -593,7 +596,10 @@ def prepare(opts: LaunchOptions):
         cfg = _with_robots(cfg, tuple(RobotEntry(f"r{k + 1}") for k in range(len(starts))))
         cfg = with_overrides(cfg, {"sim": {"start_poses": [list(p) for p in starts]}})
     else:
-        cfg = _with_robots(cfg, tuple(RobotEntry(f"r{k + 1}", p) for k, p in enumerate(starts)))
+        told = _told_starts(starts, opts.start_error)
+        cfg = _with_robots(cfg, tuple(RobotEntry(f"r{k + 1}", p) for k, p in enumerate(told)))
+        if told != starts:  # the simulator puts them where they really are
+            cfg = with_overrides(cfg, {"sim": {"start_poses": [list(p) for p in starts]}})
     out = opts.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     if not cfg.persist.dir:  # agents and coordinator keep their maps in the run folder
@@ -601,6 +607,21 @@ def prepare(opts: LaunchOptions):
     (out / "logs").mkdir(exist_ok=True)
     save_config(cfg, out / "config.toml")
     return world, cfg, out
+
+
+def _told_starts(starts: list[tuple], start_error: str) -> list[tuple]:
+    """The starts the swarm is told: one of them off by ``start_error`` (ROBOT:dx,dy,deg)."""
+    from agents.anchoring import robot_offset
+
+    off = robot_offset(start_error, "start error")
+    if off is None:
+        return starts
+    k = int(off[0][1:]) - 1 if off[0][1:].isdigit() else -1
+    if not (off[0].startswith("r") and 0 <= k < len(starts)):
+        raise ConfigError(f"start error {start_error!r}: no robot {off[0]} of {len(starts)}")
+    told = list(starts)
+    told[k] = tuple(float(v) for v in compose(starts[k], off[1]))
+    return told
 
 
 def _with_robots(cfg: Config, robots: tuple[RobotEntry, ...]) -> Config:
