@@ -40,6 +40,8 @@ class JointCorrections:
         self._last_s = -float("inf")
         self.solves = 0
         self.priors_sent = 0
+        # what the last solve saw: the edges, and the corrections of each robot's map
+        self._solved: tuple | None = None
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
@@ -64,12 +66,17 @@ class JointCorrections:
             if len(ledgers) >= 2 and reference is not None:
                 self._last_s = now_s
                 frames = {rid: main.robots[rid].frame for rid in ledgers}
-                self._running = self._pool.submit(self._solve, ledgers, reference, frames)
+                moved = {rid: main.robots[rid].ledger.corrections for rid in ledgers}
+                self._running = self._pool.submit(self._solve, ledgers, reference, frames, moved)
         return out
 
-    def _solve(self, ledgers, reference: str, frames: dict[str, int]) -> list[tuple[str, Priors]]:
+    def _solve(self, ledgers, reference: str, frames, moved) -> list[tuple[str, Priors]]:
         t0 = time.perf_counter()
         found = self.graph.find_edges(ledgers)
+        seen = (len(self.graph.edges), reference, tuple(sorted(moved.items())))
+        if seen == self._solved:  # no new edge, no map corrected: the same solution
+            return []
+        self._solved = seen
         solved = self.graph.solve(ledgers, reference)
         self.solves += 1
         out = []

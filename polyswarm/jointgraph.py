@@ -54,7 +54,7 @@ WINDOW_KEYFRAMES = 6  # keyframes either side of it
 LOCAL_RADIUS_M = 5.0  # ... whose walls' centre lies this close to its own
 TARGET_MARGIN_M = 2.0  # the other robot's keyframes this much farther out are matched on
 KEYFRAME_STEP = 3  # every third keyframe is matched (its neighbours share its walls)
-MAX_TRIES = 4  # a keyframe that found no edge is tried again this often (the others map on)
+MAX_TRIES = 4  # a keyframe with no edge is tried this often at most (as the others map near)
 MIN_WALL_POINTS = 60  # 6 m of wall in the local view (points every 0.1 m)
 MIN_INLIERS = 50  # 5 m of it within INLIER_M of the other robot's walls after ICP
 MIN_INLIER_SHARE = 0.8  # of the local view's points near the other's walls (0.5 m)
@@ -105,6 +105,7 @@ class KeyframeLedger:
 
     def __init__(self) -> None:
         self.keyframes: dict[int, LedgerKeyframe] = {}
+        self.corrections = 0  # corrections that moved a keyframe held here
 
     def __len__(self) -> int:
         return len(self.keyframes)
@@ -115,11 +116,14 @@ class KeyframeLedger:
 
     def corrected(self, moves) -> None:
         """A replayed correction: (keyframe, step of its frame in wire units) pairs."""
+        moved = False
         for kid, (dx, dy, dth) in moves:
             k = self.keyframes.get(kid)
             if k is not None:
                 f = (k.frame[0] + dx, k.frame[1] + dy, k.frame[2] + dth)
                 self.keyframes[kid] = LedgerKeyframe(f, k.walls, k.centre)
+                moved = True
+        self.corrections += moved
 
     @classmethod
     def from_atlas(cls, atlas) -> KeyframeLedger:
@@ -234,33 +238,43 @@ class JointGraph:
     their poses become) and the solve over all robots' keyframes."""
 
     edges: dict[tuple[str, int], InterEdge] = field(default_factory=dict)
-    tries: dict[tuple[str, int], int] = field(default_factory=dict)
+    # keyframes matched without an edge: (times, the other robots' keyframes near it
+    # then); tried again only when more came near (the others mapped on)
+    tries: dict[tuple[str, int], tuple[int, int]] = field(default_factory=dict)
 
     def find_edges(self, ledgers: dict[str, dict[int, LedgerKeyframe]]) -> int:
-        """Match every ``KEYFRAME_STEP``-th keyframe of each robot without an edge (at
-        most ``MAX_TRIES`` times) on each robot before it in name order; the edges found."""
+        """Match every ``KEYFRAME_STEP``-th keyframe of each robot without an edge on
+        each robot before it in name order (again, at most ``MAX_TRIES`` times, once
+        more of their keyframes are near it); the edges found."""
         found = 0
         names = sorted(ledgers)
         centres = {r: _centres(ledgers[r]) for r in names}
+        reach = LOCAL_RADIUS_M + TARGET_MARGIN_M
         for bi, b in enumerate(names):
             mine = ledgers[b]
-            for kid in sorted(mine):
-                key = (b, kid)
-                if kid % KEYFRAME_STEP or key in self.edges or self.tries.get(key, 0) >= MAX_TRIES:
+            ids, xy = centres[b]
+            for kid, centre in zip(ids, xy, strict=True):
+                key = (b, int(kid))
+                if kid % KEYFRAME_STEP or key in self.edges:
                     continue
-                tried = False
-                for a in names[:bi]:
-                    if not ledgers[a] or not _close_to(centres[a][1], _centre(mine[kid])):
-                        continue
-                    tried = True
-                    hit = match_keyframe(mine, kid, ledgers[a], centres[a], centres[b])
+                near = {
+                    a: int((np.hypot(*(centres[a][1] - centre).T) <= reach).sum())
+                    for a in names[:bi]
+                    if len(centres[a][0])
+                }
+                n_near = sum(near.values())
+                times, seen = self.tries.get(key, (0, 0))
+                if n_near <= seen or times >= MAX_TRIES:
+                    continue
+                for a in (a for a, n in near.items() if n):
+                    hit = match_keyframe(mine, int(kid), ledgers[a], centres[a], centres[b])
                     if hit is not None:
                         a_kid, z, n = hit
                         self.edges[key] = InterEdge((a, a_kid), key, z, n)
                         found += 1
                         break
-                if tried and key not in self.edges:
-                    self.tries[key] = self.tries.get(key, 0) + 1
+                if key not in self.edges:
+                    self.tries[key] = (times + 1, n_near)
         return found
 
     def solve(
@@ -314,12 +328,6 @@ def moved_m(ledger: dict[int, LedgerKeyframe], poses: dict[int, np.ndarray]) -> 
         d = math.hypot(*(p[:2] - now[:2])) + REACH_M * abs(float(wrap(p[2] - now[2])))
         out = max(out, d)
     return out
-
-
-def _close_to(xy: np.ndarray, point: np.ndarray) -> bool:
-    return bool(len(xy)) and bool(
-        (np.hypot(*(xy - point).T) <= LOCAL_RADIUS_M + TARGET_MARGIN_M).any()
-    )
 
 
 def _joined(reference: str, edges: list[InterEdge], ledgers) -> set[str]:
