@@ -11,8 +11,9 @@ builds one graph over all of them:
 * **chain edges**: each robot's consecutive keyframes as its own estimate places them,
   soft (``CHAIN_SIGMA_*``): a robot's map is good locally and drifts over distance;
 * **inter-robot edges**: a keyframe's walls and those of its neighbours in time
-  (``WINDOW_KEYFRAMES``, within ``LOCAL_RADIUS_M``) aligned by point-to-line ICP on
-  another robot's walls nearby (``polyswarm.mapmatch.align_walls``), accepted when the
+  (``WINDOW_KEYFRAMES``, within ``LOCAL_RADIUS_M``) placed on another robot's walls
+  nearby by a correlative search (``SEED_WINDOW_*``: unless another place fits nearly
+  as well) and point-to-line ICP (``polyswarm.mapmatch.align_walls``), accepted when the
   walls agree (``MIN_INLIERS``, ``MIN_INLIER_SHARE``), pin the pose in both directions
   (``MIN_CONDITION``: not a corridor) and the fix is local (``MAX_FIX_*``: frames are
   found by ``agents.anchoring`` first; this only refines them).
@@ -41,6 +42,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from polyswarm.follow import QPose, frame_of, pose_of
+from polyswarm.loopsearch import correlative_search
 from polyswarm.mapmatch import INLIER_M, NORMAL_WEIGHT_M, Walls, align_walls, wall_points
 from polyswarm.polymap import TypedPolygon, VectorType
 from polyswarm.posegraph import PoseGraph
@@ -62,8 +64,12 @@ NEAR_M = 0.5
 # smaller over larger eigenvalue of the agreeing points' normals' scatter: walls in one
 # direction only (a corridor) leave the position along them to the odometry
 MIN_CONDITION = 0.1
-MAX_FIX_M = 1.0  # a fix farther than this is another place, not a refinement
-MAX_FIX_RAD = math.radians(5.0)
+# a local view is first placed by a correlative search within this window (a start
+# told 0.58 m and 5 deg off puts walls 5 m out a metre off), then refined by ICP
+SEED_WINDOW_M = 1.0
+SEED_WINDOW_RAD = math.radians(8.0)
+MAX_FIX_M = 1.5  # a fix farther than this is another place, not a refinement
+MAX_FIX_RAD = math.radians(10.0)
 EDGE_SIGMA_M = 0.05  # an inter-robot edge: the ICP's agreement (INLIER_M) and the maps' noise
 EDGE_SIGMA_RAD = math.radians(0.5)
 # a robot's own chain: 2 cm and 0.3 deg a keyframe, growing with the distance between
@@ -202,7 +208,10 @@ def match_keyframe(
     target = _gather(theirs, near)
     if len(target.walls) < MIN_WALL_POINTS:
         return None
-    fix = align_walls(target, local, np.zeros(3))
+    seed = _seed(target, local, centre)
+    if seed is None:  # another place fits nearly as well: a corridor, repeated rooms
+        return None
+    fix = align_walls(target, local, seed)
     if math.hypot(fix[0], fix[1]) > MAX_FIX_M or abs(wrap(fix[2])) > MAX_FIX_RAD:
         return None
     inliers, share, condition = _agreement(target, local, fix)
@@ -212,6 +221,24 @@ def match_keyframe(
     b_now = pose_of(mine[kid].frame)
     z = relative(pose_of(theirs[a_kid].frame), compose(fix, b_now))
     return a_kid, z, inliers
+
+
+def _seed(target: Walls, local: Walls, centre: np.ndarray) -> np.ndarray | None:
+    """The correlative search's best fix of the local view (turning about its centre),
+    as a pose applied to its points; None when it is ambiguous."""
+    guess, _, ambiguous = correlative_search(
+        local.walls - centre,
+        (centre[0], centre[1], 0.0),
+        target.walls,
+        target.walls,
+        SEED_WINDOW_M,
+        0.1,
+        SEED_WINDOW_RAD,
+        math.radians(1.0),
+    )
+    if ambiguous:
+        return None
+    return compose(guess, (-centre[0], -centre[1], 0.0))
 
 
 def _agreement(target: Walls, local: Walls, fix: np.ndarray) -> tuple[int, float, float]:

@@ -51,6 +51,18 @@ def test_a_keyframe_placed_off_is_matched_back_onto_the_other_robots_walls():
     assert inliers > 200  # most of the 40 m of wall
 
 
+def test_a_start_most_of_a_metre_and_seven_degrees_off_is_still_matched():
+    off = (0.8, -0.5, math.radians(7.0))  # walls 5 m out are more than a metre off
+    a, b = _ledger((0, 0, 0)), _ledger(off)
+    hit = match_keyframe(b.snapshot(), 3, a.snapshot())
+    assert hit is not None
+    a_kid, z, _ = hit
+    placed = compose(pose_of(a.keyframes[a_kid].frame), z)
+    truth = compose(inverse(off), pose_of(b.keyframes[3].frame))
+    assert np.hypot(*(placed[:2] - truth[:2])) < 0.02
+    assert abs(placed[2] - truth[2]) < math.radians(0.1)
+
+
 def test_walls_that_do_not_agree_give_no_edge():
     a = _ledger((0, 0, 0))
     b = _ledger((2.5, 0, 0))  # beyond the fix a refinement may make: another place
