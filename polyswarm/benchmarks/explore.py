@@ -87,9 +87,15 @@ def plan_runs(
 
 
 def run_exploration(
-    spec: RunSpec, out: Path, speed: float, wall_limit_s: float, base: Config | None = None
+    spec: RunSpec,
+    out: Path,
+    speed: float,
+    wall_limit_s: float,
+    base: Config | None = None,
+    start_error: str = "",
 ) -> dict:
-    """One launch; ``base``: the config the profile applies on (default: the defaults)."""
+    """One launch; ``base``: the config the profile applies on (default: the defaults);
+    ``start_error`` (ROBOT:dx,dy,deg): in runs with the starts told, one told that far off."""
     from polyswarm.config import Config, with_profile
     from polyswarm.runners.launch import LaunchOptions, launch
 
@@ -106,6 +112,7 @@ def run_exploration(
         scatter=spec.start == "scattered",
         unknown_start=spec.start == "unknown",
         wrong_anchor=spec.wrong_anchor,
+        start_error=start_error if spec.start != "unknown" else "",
     )
     m = launch(opts).metrics
     row = {
@@ -116,6 +123,7 @@ def run_exploration(
         "profile": spec.profile,
         "start": spec.start,
         "wrong_anchor": spec.wrong_anchor,
+        "start_error": opts.start_error,
         "anchors": m["anchors"],
         "anchor_events": m.get("anchor_events", []),
         "pose_error_m": m.get("pose_error_m", {}),
@@ -205,6 +213,12 @@ def summarise(rows: list[dict], references: dict | None = None) -> dict:
                     "success_rate": sum(r.get("success", False) for r in rs) / len(rs),
                     "unexplored_reachable_m2_max": max(r["unexplored_reachable_m2"] for r in rs),
                     "map_iou_min": min(r["map_iou"] for r in rs),
+                    # walls where there are none (a misplaced map's ghosts), worst run, m
+                    "phantom_obstacle_m_max": _max_or_none(r.get("phantom_obstacle_m") for r in rs),
+                    # the robots' poses against ground truth: the worst robot's median
+                    "pose_err_m_median_max": _max_or_none(
+                        e["median"] for r in rs for e in r.get("pose_error_m", {}).values()
+                    ),
                 }
     groups: dict = {}  # (world, robots, strategy) -> t99 of every run
     for r in rows:
@@ -346,6 +360,7 @@ def run(
     unknown_start: bool = False,
     wrong_anchor: str = "",
     base: Config | None = None,
+    start_error: str = "",
 ) -> dict:
     out = out or Path(tempfile.mkdtemp(prefix="polyswarm-bench-explore-"))
     runs = [
@@ -365,7 +380,9 @@ def run(
         name = f"{spec.profile}-{spec.world.replace(':', '_')}-{spec.robots}-{spec.strategy}"
         name += "" if spec.start == "side-by-side" else f"-{spec.start}"
         t0 = time.monotonic()
-        row = run_exploration(spec, out / f"{name}-{spec.seed}", speed, wall_limit_s, base)
+        row = run_exploration(
+            spec, out / f"{name}-{spec.seed}", speed, wall_limit_s, base, start_error
+        )
         row["reference_t99_s"] = references.get(key)
         log.info("%s: t99 %s s in %.0f s wall", spec, row["t99_s"], time.monotonic() - t0)
         rows.append(row)

@@ -443,6 +443,11 @@ def bench_explore(
     config: Path = typer.Option(
         None, "--config", "-c", help="TOML config the runs start from (profiles apply on it)."
     ),
+    start_error: str = typer.Option(
+        "",
+        help="In the runs with the starts told, tell ROBOT's start DX metres, DY metres and "
+        "DEG degrees off where it stands (ROBOT:DX,DY,DEG): a start measured badly.",
+    ),
 ) -> None:
     """Whole explorations (t99, success, IoU) against the idealised reference run for the
     same world, robots and profile, and the coordinator cycle under load.
@@ -451,7 +456,7 @@ def bench_explore(
     for a subset. The reference's runs are cached in runs/reference-cache/."""
     from rich.console import Console
 
-    from agents.anchoring import wrong_anchor_fault
+    from agents.anchoring import robot_offset, wrong_anchor_fault
     from polyswarm.benchmarks import explore as eb
     from polyswarm.config import Config, load_config, with_profile
 
@@ -460,6 +465,7 @@ def bench_explore(
     for name in names:
         with_profile(base, name)  # an unknown profile fails here, before any run
     wrong_anchor_fault(wrong_anchor)  # and a bad fault
+    robot_offset(start_error, "start error")
     console = Console(stderr=True)
     with console.status("explorations") as status:
 
@@ -493,6 +499,7 @@ def bench_explore(
             unknown_start,
             wrong_anchor,
             base,
+            start_error,
         )
     _save(save, res)
     if as_json:
