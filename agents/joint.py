@@ -25,7 +25,7 @@ from polyswarm.jointgraph import (
     JointGraph,
     moved_m,
 )
-from protocols.messages import Priors
+from protocols.messages import MAX_PRIORS, Priors
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +84,8 @@ class JointCorrections:
             move = moved_m(ledgers[rid], poses)
             if move < PRIOR_MOVE_M:
                 continue
-            q = tuple((kid, *quantize_pose(poses[kid])) for kid in sorted(poses))
+            # the newest keyframes, if ever more than a message holds (12 bytes each)
+            q = tuple((kid, *quantize_pose(poses[kid])) for kid in sorted(poses)[-MAX_PRIORS:])
             out.append((rid, Priors(frames[rid], PRIOR_SIGMA_M, PRIOR_SIGMA_RAD, q)))
             log.info(
                 "joint pose graph: %d priors to %s (moves a keyframe %.3f m)", len(q), rid, move

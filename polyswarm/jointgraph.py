@@ -57,7 +57,7 @@ MAX_TRIES = 4  # a keyframe with no edge is tried this often at most (as the oth
 MIN_WALL_POINTS = 60  # 6 m of wall in the local view (points every 0.1 m)
 MIN_INLIERS = 50  # 5 m of it within INLIER_M of the other robot's walls after ICP
 MIN_INLIER_SHARE = 0.8  # of the local view's points near the other's walls (0.5 m)
-NEAR_M = 0.5
+NEAR_M = 0.5  # a local view's point this close to the other's walls overlaps them
 # smaller over larger eigenvalue of the agreeing points' normals' scatter: walls in one
 # direction only (a corridor) leave the position along them to the odometry
 MIN_CONDITION = 0.1
@@ -67,8 +67,6 @@ SEED_WINDOW_M = 1.0
 SEED_WINDOW_RAD = math.radians(8.0)
 MAX_FIX_M = 1.5  # a fix farther than this is another place, not a refinement
 MAX_FIX_RAD = math.radians(10.0)
-EDGE_SIGMA_M = 0.05  # an inter-robot edge: the ICP's agreement (INLIER_M) and the maps' noise
-EDGE_SIGMA_RAD = math.radians(0.5)
 # an edge as a measure of where one robot's map lies against another's: the ICP's
 # agreement, and a turn's error carried out over the keyframes' spread
 RIGID_SIGMA_M = 0.10
@@ -81,8 +79,10 @@ CONSISTENT_M = 0.15
 # far (a turn counts at REACH_M, as corrections do)
 PRIOR_MOVE_M = 0.03
 REACH_M = 5.0
-PRIOR_SIGMA_M = EDGE_SIGMA_M
-PRIOR_SIGMA_RAD = EDGE_SIGMA_RAD
+# a prior in the robot's own graph: where the swarm placed that keyframe, as sure as the
+# walls that placed it agree (the ICP's INLIER_M and the maps' noise)
+PRIOR_SIGMA_M = 0.05
+PRIOR_SIGMA_RAD = math.radians(0.5)
 
 
 @dataclass(frozen=True)

@@ -128,8 +128,10 @@ def test_a_withdrawn_frame_is_a_frame_of_its_own_until_the_next_anchor(tmp_path)
     agent.on_merged_map(agent.slam.map)
     assert agent.in_shared_frame and agent.merged is not None
     pose, version = agent.pose.copy(), agent.slam.map.version
+    agent.slam.graph.set_priors({0: np.zeros(3)}, 0.05, 0.01)  # the joint graph placed it
     agent.on_anchor(Anchor(2, 0.0, 0.0, 0.0, own=True))
     assert agent.frame == 2 and agent.own_frame and not agent.in_shared_frame
+    assert agent.slam.graph.priors == {}  # given in the frame withdrawn
     assert agent.merged is None and np.array_equal(agent.pose, pose)
     agent.on_peer_pose("r1", 0.1, Pose(1.0, 0.0, 0.0, frame=0))
     assert agent.peers == {}
