@@ -8,8 +8,10 @@ robot one of whose keyframes that another robot's walls hold would move by
 keyframe of it. It holds them in its own pose graph; its map follows, and the
 coordinator replays that correction like any other.
 
-The reference robot (its first keyframe fixed) is the first robot, in name order, whose
-frame nobody audits (its start was given, or its frame is the map's)."""
+The reference robot (its map is not moved) is the first robot, in name order, whose
+frame nobody audits (its start was given, or its frame is the map's). Priors are the
+solution for the ledgers as they were when the solve began: a robot that corrected
+itself since gets them a solve late, and its own graph weighs them against its loops."""
 
 from __future__ import annotations
 
@@ -33,6 +35,8 @@ JOINT_PERIOD_S = 10.0  # simulated seconds between solves (as the frames' audits
 
 
 class JointCorrections:
+    """The joint pose graph's edges and its solves, for one coordinator."""
+
     def __init__(self) -> None:
         self.graph = JointGraph()
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="jointgraph")
