@@ -159,10 +159,10 @@ class PoseGraph:
         cost0 = 0.5 * float(np.sum(self.residuals(poses, arrays) ** 2))
         for it in range(max_iterations):
             robust = it >= max_iterations // 3
-            rows, J = self._system(poses, arrays, robust)
+            err, J = self._system(poses, arrays, robust)
             J = J.tocsc()[:, 3 * free :]
             H = (J.T @ J).tocsc() + scipy.sparse.identity(3 * (n - free)) * 1e-9
-            step = scipy.sparse.linalg.spsolve(H, -(J.T @ rows))
+            step = scipy.sparse.linalg.spsolve(H, -(J.T @ err))
             poses[free:] += step.reshape(-1, 3)
             poses[:, 2] = wrap(poses[:, 2])
             if np.abs(step).max() < 1e-6 and robust:
