@@ -191,13 +191,14 @@ def test_a_withdrawn_robots_copy_is_journaled_aside_not_restored(tmp_path):
         robot2, ops2 = ops_of([shifted(r, 10.0) for r in RECTS[:3]])
         for op in ops2:
             c.on_robot_merge("r2", 0.1, op)
-        settle(c)
-        c.withdraw("r2")
+        c.withdraw("r2")  # its merges still on their way
         settle(c)
         for _ in range(50):  # the worker sets the journal aside after its updates
             if not (tmp_path / "coordinator-robots" / "r2.polymap").exists():
                 break
             time.sleep(0.05)
+        c.collect(0.5)  # the results of its merges, replayed before the drop
+        assert "r2" not in c.robots  # do not bring it back
     _, robots = persist.load_coordinator(tmp_path)
     assert set(robots) == {"r1"} and same(robots["r1"], robot1)
     aside = persist.load_map(tmp_path / "coordinator-robots" / "withdrawn" / "r2-0.polymap")
