@@ -36,11 +36,17 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from polyswarm.follow import QPose, frame_of, pose_of
+from polyswarm.follow import REACH_M, QPose, frame_of, pose_of
 from polyswarm.loopsearch import correlative_search
-from polyswarm.mapmatch import INLIER_M, NORMAL_WEIGHT_M, Walls, align_walls, wall_points
+from polyswarm.mapmatch import (
+    INLIER_M,
+    NORMAL_WEIGHT_M,
+    Walls,
+    align_walls,
+    wall_points,
+    wall_tree,
+)
 from polyswarm.polymap import TypedPolygon, VectorType
 from polyswarm.posegraph import PoseGraph
 from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
@@ -76,9 +82,8 @@ MIN_EDGES = 3  # a robot is placed on at least this many edges, not on one match
 # (a map bent by its own drift, or wrong edges, is left to the robot's own graph)
 CONSISTENT_M = 0.15
 # priors are sent for a robot when the joint graph moves one of its held keyframes this
-# far (a turn counts at REACH_M, as corrections do)
+# far (a turn counts at follow.REACH_M, as corrections do)
 PRIOR_MOVE_M = 0.03
-REACH_M = 5.0
 # a prior in the robot's own graph: where the swarm placed that keyframe, as sure as the
 # walls that placed it agree (the ICP's INLIER_M and the maps' noise)
 PRIOR_SIGMA_M = 0.05
@@ -211,10 +216,11 @@ def match_keyframe(
     seed = _seed(target, local, centre)
     if seed is None:  # another place fits nearly as well: a corridor, repeated rooms
         return None
-    fix = align_walls(target, local, seed)
+    tree = wall_tree(target)
+    fix = align_walls(target, local, seed, tree)
     if math.hypot(fix[0], fix[1]) > MAX_FIX_M or abs(wrap(fix[2])) > MAX_FIX_RAD:
         return None
-    inliers, share, condition = _agreement(target, local, fix)
+    inliers, share, condition = _agreement(tree, local, fix)
     if inliers < MIN_INLIERS or share < MIN_INLIER_SHARE or condition < MIN_CONDITION:
         return None
     a_kid = int(near[np.argmin(d[d <= LOCAL_RADIUS_M + TARGET_MARGIN_M])])
@@ -241,14 +247,14 @@ def _seed(target: Walls, local: Walls, centre: np.ndarray) -> np.ndarray | None:
     return compose(guess, (-centre[0], -centre[1], 0.0))
 
 
-def _agreement(target: Walls, local: Walls, fix: np.ndarray) -> tuple[int, float, float]:
+def _agreement(tree, local: Walls, fix: np.ndarray) -> tuple[int, float, float]:
     """After ``fix``: the local points within ``INLIER_M`` of a same-facing wall of the
-    target, their share of the points within ``NEAR_M`` of one, and the condition of
-    their normals (1: walls in all directions, 0: all parallel)."""
+    target (``tree``: its ``wall_tree``), their share of the points within ``NEAR_M``
+    of one, and the condition of their normals (1: walls in all directions, 0: all
+    parallel)."""
     c, s = math.cos(fix[2]), math.sin(fix[2])
     q = transform_points(fix, local.walls)
     nq = local.normals @ np.array([[c, s], [-s, c]])
-    tree = cKDTree(np.hstack([target.walls, NORMAL_WEIGHT_M * target.normals]))
     d, _ = tree.query(np.hstack([q, NORMAL_WEIGHT_M * nq]), distance_upper_bound=NEAR_M)
     near = np.isfinite(d)
     good = d <= INLIER_M
@@ -367,12 +373,7 @@ def _misfit(a: np.ndarray, b: np.ndarray) -> float:
 
 def moved_m(ledger: dict[int, LedgerKeyframe], poses: dict[int, np.ndarray]) -> float:
     """How far ``poses`` move the farthest-moved keyframe (a turn counts at ``REACH_M``)."""
-    out = 0.0
-    for kid, p in poses.items():
-        now = pose_of(ledger[kid].frame)
-        d = math.hypot(*(p[:2] - now[:2])) + REACH_M * abs(float(wrap(p[2] - now[2])))
-        out = max(out, d)
-    return out
+    return max((_misfit(p, pose_of(ledger[kid].frame)) for kid, p in poses.items()), default=0.0)
 
 
 def _joined(reference: str, edges: list[InterEdge], ledgers) -> set[str]:

@@ -168,11 +168,12 @@ def wall_points(starts: np.ndarray, ends: np.ndarray) -> Walls:
     return Walls(walls, normals)
 
 
-def align_walls(a: Walls, b: Walls, pose) -> np.ndarray:
+def align_walls(a: Walls, b: Walls, pose, tree: cKDTree | None = None) -> np.ndarray:
     """The pose that puts B's wall points (in their own frame) on A's walls, by
     point-to-line ICP from ``pose`` (a wall face only matches a face seen from the same
-    side); ``pose`` itself if ICP wanders farther than ``ICP_MAX_SHIFT_M``."""
-    return _icp(a, _wall_tree(a), b, np.array(pose, dtype=float))
+    side); ``pose`` itself if ICP wanders farther than ``ICP_MAX_SHIFT_M``. ``tree``:
+    A's ``wall_tree``, if the caller has it."""
+    return _icp(a, tree if tree is not None else wall_tree(a), b, np.array(pose, dtype=float))
 
 
 def _view(pmap: GridPolyMap) -> _MapView:
@@ -290,7 +291,7 @@ def _close(p: np.ndarray, q: np.ndarray, d_m: float, d_rad: float) -> bool:
 # -- refine and verify -------------------------------------------------------------------
 
 
-def _wall_tree(v: _MapView | Walls) -> cKDTree:
+def wall_tree(v: _MapView | Walls) -> cKDTree:
     """A's wall points with their normals (scaled): a point matches a wall face seen
     from the same side only (the two faces of a thin wall are apart in normal space)."""
     return cKDTree(np.hstack([v.walls, NORMAL_WEIGHT_M * v.normals]))
@@ -429,7 +430,7 @@ def match_maps(
     cands = _search(va, vb)
     if not cands:
         return MapMatch(np.zeros(3), False, "no candidate pose", 0, 0, 0, 1, 0, 0)
-    tree = _wall_tree(va)
+    tree = wall_tree(va)
     refined, contradicted = [], 0
     for _, pose in cands[:PEAKS]:  # not further: a weak peak is no candidate for its rivals
         if contradicts is not None and contradicts(pose):
@@ -467,7 +468,7 @@ def _symmetries(v: _MapView) -> list[np.ndarray]:
     """The poses ``S`` (not the identity) at which a map fits itself: ``S`` moves it onto
     itself without contradiction (a ring corridor after a quarter turn, a corridor along
     itself, a row of identical rooms)."""
-    tree = _wall_tree(v)
+    tree = wall_tree(v)
     out: list[np.ndarray] = []
     for _, pose in _search(v, v)[:PEAKS]:
         if _close(pose, np.zeros(3), RIVAL_APART_M, RIVAL_APART_RAD):
