@@ -11,7 +11,7 @@ coordinator replays that correction like any other.
 The reference robot (its map is not moved) is the first robot, in name order, whose
 frame nobody audits (its start was given, or its frame is the map's). Priors are the
 solution for the ledgers as they were when the solve began: a robot that corrected
-itself since gets them a solve late, and its own graph weighs them against its loops."""
+itself since gets none from that solve (they would undo its correction), but the next's."""
 
 from __future__ import annotations
 
@@ -46,6 +46,7 @@ class JointCorrections:
         self.priors_sent = 0
         # what the last solve saw: the edges, and the corrections of each robot's map
         self._solved: tuple | None = None
+        self._moved_at_start: dict[str, int] = {}  # each robot's corrections when it began
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
@@ -56,7 +57,8 @@ class JointCorrections:
         out = []
         if self._running is not None and self._running.done():
             try:
-                out = self._running.result()
+                out = self._fresh(main, self._running.result())
+                self.priors_sent += len(out)
             except Exception:  # a failed solve must not stop the coordinator: retried
                 log.exception("the joint pose graph failed")
             self._running = None
@@ -71,7 +73,23 @@ class JointCorrections:
                 self._last_s = now_s
                 frames = {rid: main.robots[rid].frame for rid in ledgers}
                 moved = {rid: main.robots[rid].ledger.corrections for rid in ledgers}
+                self._moved_at_start = moved
                 self._running = self._pool.submit(self._solve, ledgers, reference, frames, moved)
+        return out
+
+    def _fresh(self, main, solved: list[tuple[str, Priors]]) -> list[tuple[str, Priors]]:
+        """The priors of a finished solve, less those for a robot whose map was corrected
+        (a loop of its own) while it ran: they would pull its keyframes back to where
+        they were before; the next solve, due in ``JOINT_PERIOD_S``, sees the correction."""
+        out = []
+        for rid, priors in solved:
+            info = main.robots.get(rid)
+            if info is None or info.ledger is None:
+                continue
+            if info.ledger.corrections != self._moved_at_start.get(rid):
+                log.info("joint pose graph: priors to %s dropped: its map moved meanwhile", rid)
+                continue
+            out.append((rid, priors))
         return out
 
     def _solve(self, ledgers, reference: str, frames, moved) -> list[tuple[str, Priors]]:
@@ -101,5 +119,4 @@ class JointCorrections:
             found,
             (time.perf_counter() - t0) * 1e3,
         )
-        self.priors_sent += len(out)
         return out

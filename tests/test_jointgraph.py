@@ -221,3 +221,39 @@ def test_the_coordinator_sends_priors_in_the_frame_each_robot_speaks_in():
     truth = _truth(_ledger(OFF), kid)
     assert abs(x / 1000 - truth[0]) < 0.02 and abs(y / 1000 - truth[1]) < 0.02
     assert abs(th / 100_000 - truth[2]) < math.radians(0.1)
+
+
+def test_priors_for_a_robot_whose_map_moved_during_the_solve_wait_for_the_next():
+    """A loop of r2's own corrected its map while the solve ran: that solve's priors
+    would pull its keyframes back, so they are dropped; the next solve sends fresh ones."""
+    import time
+
+    from agents.coordinator import Coordinator
+    from agents.joint import JOINT_PERIOD_S, JointCorrections
+    from polyswarm.config import Config
+    from polyswarm.polymap import GridPolyMap
+
+    coord = Coordinator(Config(), {"r1": (0.0, 0.0, 0.0)})
+    for rid, pose in (("r1", (0, 0, 0)), ("r2", OFF)):
+        info = coord.robot(rid)
+        info.ledger, info.map = _ledger(pose), GridPolyMap(2.0)
+
+    def wait(now_s: float) -> list:
+        for _ in range(100):
+            time.sleep(0.05)
+            if joint._running is None:
+                return []
+            if joint._running.done():
+                return joint.tick(coord, now_s, {"r2"})
+        raise AssertionError("the solve did not finish")
+
+    joint = JointCorrections()
+    try:
+        assert joint.tick(coord, 0.0, {"r2"}) == []  # started
+        coord.robot("r2").ledger.corrections += 1  # r2 closed a loop meanwhile
+        assert wait(1.0) == []
+        assert joint.tick(coord, JOINT_PERIOD_S, {"r2"}) == []  # the next solve started
+        out = wait(JOINT_PERIOD_S)
+    finally:
+        joint.close()
+    assert [rid for rid, _ in out] == ["r2"]
