@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agents import persist
+from agents.meeting import Meetings
 from agents.merger import Merged, MergeJob, MergeLostError, MergeProcess, merge_step
 from agents.replay import Replayed, ReplayPool
 from polyswarm.config import Config, known_starts
@@ -250,6 +251,7 @@ class Coordinator:
         # this coordinator's frame). A robot exploring alone is drawn to where its candidate
         # frame puts the nearest robot of the swarm
         self.rendezvous: dict[str, tuple[float, float]] = {}
+        self.meetings = Meetings(cfg)  # their tours once no frontier is left
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -750,6 +752,9 @@ class Coordinator:
         if self.state == MissionState.STARTING and live and self.merged.cells:
             self.state = MissionState.EXPLORING
             log.info("exploring with %s", [r.id for r in live])
+        if self.rendezvous and self.state in (MissionState.RETURNING, MissionState.DONE):
+            log.info("drawn to a rendezvous: exploring again")  # a solo robot, to be seen
+            self.state = MissionState.EXPLORING
         if self.state in (MissionState.EXPLORING, MissionState.RETURNING) and live:
             # 1. shortest paths from every robot over the navigation graph
             if self._index is None:
@@ -771,7 +776,9 @@ class Coordinator:
                 log.info("new frontiers while returning: exploring again")
                 self.state = MissionState.EXPLORING
             if self.state == MissionState.EXPLORING:
-                if not reachable.any():
+                if not reachable.any() and self.meetings.orders(self, live, reach):
+                    self._no_target_since, self._no_target_cycles = None, 0
+                elif not reachable.any():
                     if self._no_target_since is None:
                         self._no_target_since = self.now
                     # every robot's map merged up to what it announced: nothing in flight;
@@ -1084,6 +1091,11 @@ class Coordinator:
         self._no_target_since, self._no_target_cycles = None, 0
         self._wake = True
         return True
+
+    def new_target_id(self) -> int:
+        """A target id not used before in this mission."""
+        self._next_id += 1
+        return self._next_id - 1
 
     def _end_exploration(self, live) -> None:
         self.targets = {}

@@ -1,0 +1,64 @@
+"""Standpoints for a robot waiting for its frame: places in its own map from which it can
+be seen by the robot its candidate frame puts nearby, apart from where it stood before.
+
+A frame is committed only once the robots saw each other in ``SEEN_APART_M``-distinct
+places (``polyswarm.sighting``). A waiting robot is drawn towards the other robot through
+its frontiers; once its own map has none left it stands still, and where the robots
+never come together on their way (a flat a long-range lidar explores from the doorways
+in seconds) they are seen in one or two places and never merged. Touring standpoints
+around the other robot gives the sightings places of their own.
+
+    pts = standpoints(own_map, other_xy, visited, reach_m=6.0)   # (n, 2), metres
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+
+from polyswarm.polymap import VectorType
+from polyswarm.sighting import MIN_SIGHT_M, SEEN_APART_M, Room
+
+# nearer than this a sighting's bearing says nothing (MIN_SIGHT_M), plus a margin for the
+# robots' pose errors: a standpoint at least this far from the other robot
+MEET_NEAR_M = MIN_SIGHT_M + 0.4
+MEET_STEP_M = 0.5  # candidate standpoints on a grid this fine (metres)
+# a standpoint this far from walls: the planner's goals need room, and a robot pressed to
+# a wall shows its lidar little of the other (robot radius and a margin, thesis base)
+MEET_WALL_M = 0.35
+
+
+def standpoints(pmap, other_xy, visited, reach_m: float, wall_m: float = MEET_WALL_M) -> np.ndarray:
+    """Candidate standpoints (n, 2) in ``pmap``'s explored free space: between
+    ``MEET_NEAR_M`` and ``reach_m`` from ``other_xy``, at least ``wall_m`` from its
+    obstacle vectors, with a straight view of ``other_xy`` that crosses none of them, and
+    at least ``SEEN_APART_M`` from every point of ``visited`` ((m, 2)). Nearest to the
+    other robot first."""
+    other = np.asarray(other_xy, dtype=float).reshape(2)
+    if reach_m <= MEET_NEAR_M:
+        return np.zeros((0, 2))
+    n = math.ceil(reach_m / MEET_STEP_M)
+    ax = np.arange(-n, n + 1) * MEET_STEP_M
+    gx, gy = np.meshgrid(ax, ax, indexing="ij")
+    pts = other + np.column_stack([gx.ravel(), gy.ravel()])
+    d = np.hypot(*(pts - other).T)
+    pts, d = pts[(d >= MEET_NEAR_M) & (d <= reach_m)], d[(d >= MEET_NEAR_M) & (d <= reach_m)]
+    keep = Room(pmap).allows(pts)
+    seen = np.asarray(visited, dtype=float).reshape(-1, 2)
+    if len(seen):
+        apart = np.hypot(*(pts[:, None, :] - seen[None, :, :]).transpose(2, 0, 1))
+        keep &= (apart >= SEEN_APART_M).all(axis=1)
+    pts, d = pts[keep], d[keep]
+    if len(pts) == 0:
+        return pts
+    st, en, _ = pmap.vectors([VectorType.OBSTACLE])
+    if len(st):
+        walls = shapely.MultiLineString([[tuple(a), tuple(b)] for a, b in zip(st, en, strict=True)])
+        shapely.prepare(walls)
+        clear = shapely.distance(shapely.points(pts), walls) >= wall_m
+        sight = shapely.linestrings(np.stack([pts, np.broadcast_to(other, pts.shape)], axis=1))
+        clear &= ~shapely.intersects(sight, walls)
+        pts, d = pts[clear], d[clear]
+    return pts[np.argsort(d, kind="stable")]

@@ -1,0 +1,82 @@
+"""Standpoints of a robot waiting for its frame (``polyswarm.meeting``), on an L-shaped
+flat checkable by hand, and the solo coordinator's tour (``agents.meeting``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+
+from polyswarm.meeting import MEET_NEAR_M, standpoints
+from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
+from polyswarm.sighting import SEEN_APART_M
+
+# an L: a 10 m x 4 m arm along x, and a 4 m x 8 m arm up from its right end
+L_FLAT = np.array([(0, 0), (10, 0), (10, 8), (6, 8), (6, 4), (0, 4)], dtype=float)
+OTHER = (2.0, 2.0)  # where the candidate frame puts the other robot: in the long arm
+
+
+def _flat() -> GridPolyMap:
+    ring = Ring(L_FLAT, [VectorType.OBSTACLE] * len(L_FLAT))
+    return GridPolyMap(2.0).merge(TypedPolygon(ring)).map
+
+
+def test_standpoints_are_in_sight_within_reach_and_off_the_walls():
+    pts = standpoints(_flat(), OTHER, [], reach_m=6.0, wall_m=0.35)
+    assert len(pts) > 10
+    d = np.hypot(*(pts - OTHER).T)
+    assert (d >= MEET_NEAR_M - 1e-9).all() and (d <= 6.0 + 1e-9).all()
+    assert (np.diff(d) >= -1e-9).all()  # nearest to the other robot first
+    flat = shapely.Polygon(L_FLAT)
+    assert all(flat.exterior.distance(shapely.Point(p)) >= 0.35 - 1e-9 for p in pts)
+    assert all(flat.contains(shapely.Point(p)) for p in pts)
+    # the inner corner (6, 4) hides the upper arm's far side from (2, 2): nothing up there
+    # lies on the far side of the line from (2, 2) through the corner
+    for x, y in pts:
+        if y > 4.0:
+            assert (x - 2.0) * (4.0 - 2.0) - (y - 2.0) * (6.0 - 2.0) >= -1e-9
+
+
+def test_standpoints_keep_apart_from_those_visited():
+    visited = [(4.5, 2.0), (2.0, 0.5)]
+    pts = standpoints(_flat(), OTHER, visited, reach_m=6.0, wall_m=0.35)
+    gaps = np.hypot(*(pts[:, None, :] - np.array(visited)[None]).transpose(2, 0, 1))
+    assert len(pts) and (gaps >= SEEN_APART_M - 1e-9).all()
+
+
+def test_no_standpoint_when_the_lidar_reaches_less_than_a_sighting_needs():
+    assert len(standpoints(_flat(), OTHER, [], reach_m=MEET_NEAR_M * 0.9)) == 0
+
+
+def test_a_solo_robot_with_no_frontier_left_tours_standpoints_in_sight_of_the_rendezvous():
+    """The solo coordinator of a waiting robot whose map is explored: drawn to a
+    rendezvous, it is sent to a standpoint facing it, and after reporting it reached to
+    one at least ``SEEN_APART_M`` from the first; without a rendezvous it goes home."""
+    from agents.coordinator import Coordinator
+    from polyswarm.config import Config
+    from protocols.messages import AssignmentKind, Pose, RobotState, RobotStatus
+
+    cfg = Config()
+    coord = Coordinator(cfg, {"r2": (8.0, 6.0, 0.0)})
+    flat = _flat()
+    coord.on_robot_map("r2", flat)
+    coord.flush()
+    coord.on_alive("r2", True)
+    coord.on_pose("r2", 1.0, Pose(8.0, 6.0, 0.0))
+    coord.rendezvous = {"r2": OTHER}
+    orders = []
+    for step in range(2, 40):
+        coord.now = float(step)
+        out = coord.cycle()
+        a = out.assignments.get("r2")
+        if a is not None and (not orders or a.target != orders[-1].target):
+            orders.append(a)
+            coord.on_status("r2", float(step), RobotStatus(RobotState.REACHED, a.target))
+        if len(orders) == 2:
+            break
+    assert len(orders) == 2, orders
+    for a in orders:
+        assert a.kind == AssignmentKind.EXPLORE and a.frontier == (OTHER,)
+        assert MEET_NEAR_M - 1e-9 <= math.dist(a.goal, OTHER) <= 6.0 + 1e-9
+    assert math.dist(orders[0].goal, orders[1].goal) >= SEEN_APART_M - 1e-9
