@@ -752,7 +752,11 @@ class Coordinator:
         if self.state == MissionState.STARTING and live and self.merged.cells:
             self.state = MissionState.EXPLORING
             log.info("exploring with %s", [r.id for r in live])
-        if self.rendezvous and self.state in (MissionState.RETURNING, MissionState.DONE):
+        if (
+            self.rendezvous
+            and self.state in (MissionState.RETURNING, MissionState.DONE)
+            and self.meetings.may_tour(self.rendezvous)
+        ):
             log.info("drawn to a rendezvous: exploring again")  # a solo robot, to be seen
             self.state = MissionState.EXPLORING
         if self.state in (MissionState.EXPLORING, MissionState.RETURNING) and live:

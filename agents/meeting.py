@@ -23,6 +23,7 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.meeting import standpoints
+from polyswarm.sighting import SEEN_APART_M
 from protocols.messages import Assignment, AssignmentKind, RobotState
 
 log = logging.getLogger(__name__)
@@ -40,6 +41,12 @@ class _Tour:
     target: int | None = None  # the assignment sent for the current one
     goal: tuple[float, float] = (0.0, 0.0)
     since_s: float = 0.0
+    # the rendezvous at which no standpoint was left: tried again once it moves
+    exhausted_at: tuple[float, float] | None = None
+
+    def exhausted(self, xy) -> bool:
+        at = self.exhausted_at
+        return at is not None and math.dist(at, xy) < SEEN_APART_M
 
 
 class Meetings:
@@ -49,6 +56,13 @@ class Meetings:
         self.reach_m = min(MEET_MAX_M, MEET_RANGE_SHARE * cfg.sim.lidar.range_max_m)
         self.wall_m = cfg.nav.obstacle_clearance_m
         self.tours: dict[str, _Tour] = {}
+
+    def may_tour(self, rendezvous: dict[str, tuple[float, float]]) -> bool:
+        """Whether a robot drawn to ``rendezvous`` may have a standpoint left."""
+        return any(
+            rid not in self.tours or not self.tours[rid].exhausted(xy)
+            for rid, xy in rendezvous.items()
+        )
 
     def orders(self, coord, live, reach) -> bool:
         """Send every robot of ``coord`` with a rendezvous to its next standpoint when it
@@ -60,6 +74,8 @@ class Meetings:
             if xy is None:
                 continue
             tour = self.tours.setdefault(r.id, _Tour())
+            if tour.exhausted(xy):
+                continue
             if tour.target is not None:
                 a = r.assignment
                 if a is not None and a.target == tour.target and not self._over(r, tour, coord):
@@ -69,10 +85,10 @@ class Meetings:
                 tour.target = None
             pts = standpoints(coord.merged, xy, tour.visited, self.reach_m, self.wall_m)
             pts = pts[:MEET_CANDIDATES]
-            if len(pts) == 0:
-                continue
-            cost = reach.costs([tuple(p) for p in pts])[k]
+            cost = reach.costs([tuple(p) for p in pts])[k] if len(pts) else np.zeros(0)
             if not np.isfinite(cost).any():
+                tour.exhausted_at = (float(xy[0]), float(xy[1]))
+                log.info("%s: no standpoint left in sight of (%.1f, %.1f)", r.id, *xy)
                 continue
             j = int(np.argmin(cost))
             goal = (float(pts[j][0]), float(pts[j][1]))

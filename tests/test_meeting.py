@@ -80,3 +80,29 @@ def test_a_solo_robot_with_no_frontier_left_tours_standpoints_in_sight_of_the_re
         assert a.kind == AssignmentKind.EXPLORE and a.frontier == (OTHER,)
         assert MEET_NEAR_M - 1e-9 <= math.dist(a.goal, OTHER) <= 6.0 + 1e-9
     assert math.dist(orders[0].goal, orders[1].goal) >= SEEN_APART_M - 1e-9
+
+
+def test_a_tour_with_no_standpoint_left_lets_the_solo_coordinator_end():
+    """Every standpoint visited: the robot goes home, and is not called back at every
+    cycle while the rendezvous stays where it was."""
+    from agents.coordinator import Coordinator
+    from agents.meeting import _Tour
+    from polyswarm.config import Config
+    from protocols.messages import AssignmentKind, MissionState, Pose
+
+    coord = Coordinator(Config(), {"r2": (8.0, 6.0, 0.0)})
+    coord.on_robot_map("r2", _flat())
+    coord.flush()
+    coord.on_alive("r2", True)
+    coord.on_pose("r2", 1.0, Pose(8.0, 6.0, 0.0))
+    coord.rendezvous = {"r2": OTHER}
+    tour = coord.meetings.tours.setdefault("r2", _Tour())
+    tour.visited = [tuple(p) for p in standpoints(_flat(), OTHER, [], 6.0)]  # all of them
+    states = []
+    for step in range(2, 60):
+        coord.now = float(step)
+        coord.cycle()
+        states.append(coord.state)
+    assert MissionState.RETURNING in states
+    assert states[-1] in (MissionState.RETURNING, MissionState.DONE)
+    assert coord.robots["r2"].assignment.kind == AssignmentKind.HOME
