@@ -358,7 +358,8 @@ class Anchoring:
             return
         there = transform_points(inverse(frame), np.array([r.pose[:2] for r in others]))
         k = int(np.argmin(np.hypot(*(there - me[:2]).T)))
-        solo.rendezvous[rid] = (float(there[k][0]), float(there[k][1]))
+        heading = compose(inverse(frame), others[k].pose)[2]  # its lidar looks this way
+        solo.rendezvous[rid] = (float(there[k][0]), float(there[k][1]), float(heading))
 
     def _took(self, rid: str, w: _Waiting, done: Future) -> None:
         try:

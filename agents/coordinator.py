@@ -247,10 +247,10 @@ class Coordinator:
         self.fetch_bytes = 0  # ... and the bytes they took
         self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
         self.frames_pending: tuple[str, ...] = ()  # robots exploring in frames of their own
-        # robots drawn to a rendezvous (``agents.anchoring``): robot -> point (x m, y m, in
-        # this coordinator's frame). A robot exploring alone is drawn to where its candidate
-        # frame puts the nearest robot of the swarm
-        self.rendezvous: dict[str, tuple[float, float]] = {}
+        # robots drawn to a rendezvous (``agents.anchoring``): robot -> (x m, y m, heading
+        # rad) in this coordinator's frame. A robot exploring alone is drawn to where its
+        # candidate frame puts the nearest robot of the swarm (and the way that one faces)
+        self.rendezvous: dict[str, tuple[float, ...]] = {}
         self.meetings = Meetings(cfg)  # their tours once no frontier is left
 
     # -- inputs -------------------------------------------------------------------------------
@@ -949,9 +949,9 @@ class Coordinator:
             return costs
         out = costs.copy()
         for k, r in enumerate(live):
-            xy = self.rendezvous.get(r.id)
-            if xy is not None:
-                out[k] += RENDEZVOUS_WEIGHT * np.hypot(*(goals - xy).T)
+            at = self.rendezvous.get(r.id)
+            if at is not None:
+                out[k] += RENDEZVOUS_WEIGHT * np.hypot(*(goals - at[:2]).T)
         return out
 
     def _watch_progress(self, live, ids, costs) -> None:

@@ -55,13 +55,14 @@ class Meetings:
     def __init__(self, cfg: Config) -> None:
         self.reach_m = min(MEET_MAX_M, MEET_RANGE_SHARE * cfg.sim.lidar.range_max_m)
         self.wall_m = cfg.nav.obstacle_clearance_m
+        self.fov_rad = cfg.sim.lidar.fov_rad  # the swarm's robots' lidars, as this one's
         self.tours: dict[str, _Tour] = {}
 
-    def may_tour(self, rendezvous: dict[str, tuple[float, float]]) -> bool:
+    def may_tour(self, rendezvous: dict[str, tuple[float, ...]]) -> bool:
         """Whether a robot drawn to ``rendezvous`` may have a standpoint left."""
         return any(
-            rid not in self.tours or not self.tours[rid].exhausted(xy)
-            for rid, xy in rendezvous.items()
+            rid not in self.tours or not self.tours[rid].exhausted(at[:2])
+            for rid, at in rendezvous.items()
         )
 
     def orders(self, coord, live, reach) -> bool:
@@ -70,9 +71,10 @@ class Meetings:
         ``coord``'s graph). True while one of them tours."""
         touring = False
         for k, r in enumerate(live):
-            xy = coord.rendezvous.get(r.id)
-            if xy is None:
+            at = coord.rendezvous.get(r.id)
+            if at is None:
                 continue
+            xy = (float(at[0]), float(at[1]))
             tour = self.tours.setdefault(r.id, _Tour())
             if tour.exhausted(xy):
                 continue
@@ -83,11 +85,13 @@ class Meetings:
                     continue
                 tour.visited.append(tour.goal)  # reached, failed or timed out: not again
                 tour.target = None
-            pts = standpoints(coord.merged, xy, tour.visited, self.reach_m, self.wall_m)
+            pts = standpoints(
+                coord.merged, at, tour.visited, self.reach_m, self.wall_m, self.fov_rad
+            )
             pts = pts[:MEET_CANDIDATES]
             cost = reach.costs([tuple(p) for p in pts])[k] if len(pts) else np.zeros(0)
             if not np.isfinite(cost).any():
-                tour.exhausted_at = (float(xy[0]), float(xy[1]))
+                tour.exhausted_at = xy
                 log.info("%s: no standpoint left in sight of (%.1f, %.1f)", r.id, *xy)
                 continue
             j = int(np.argmin(cost))
@@ -96,7 +100,7 @@ class Meetings:
                 AssignmentKind.EXPLORE,
                 coord.new_target_id(),
                 goal,
-                ((float(xy[0]), float(xy[1])),),  # the robot turns to face it there
+                (xy,),  # the robot turns to face it there
                 float(cost[j]),
                 coord.merged.version,
             )

@@ -8,7 +8,7 @@ never come together on their way (a flat a long-range lidar explores from the do
 in seconds) they are seen in one or two places and never merged. Touring standpoints
 around the other robot gives the sightings places of their own.
 
-    pts = standpoints(own_map, other_xy, visited, reach_m=6.0)   # (n, 2), metres
+    pts = standpoints(own_map, (x, y, heading), visited, reach_m=6.0, fov_rad=fov)  # (n, 2)
 """
 
 from __future__ import annotations
@@ -28,23 +28,41 @@ MEET_STEP_M = 0.5  # candidate standpoints on a grid this fine (metres)
 # a standpoint this far from walls: the planner's goals need room, and a robot pressed to
 # a wall shows its lidar little of the other (robot radius and a margin, thesis base)
 MEET_WALL_M = 0.35
+# the other robot's heading is a candidate frame's guess and it may turn: standpoints this
+# far inside the edges of its lidar's field of view (radians; 15 degrees)
+FOV_MARGIN_RAD = math.radians(15.0)
 
 
-def standpoints(pmap, other_xy, visited, reach_m: float, wall_m: float = MEET_WALL_M) -> np.ndarray:
+def standpoints(
+    pmap,
+    other,
+    visited,
+    reach_m: float,
+    wall_m: float = MEET_WALL_M,
+    fov_rad: float = 2 * math.pi,
+) -> np.ndarray:
     """Candidate standpoints (n, 2) in ``pmap``'s explored free space: between
-    ``MEET_NEAR_M`` and ``reach_m`` from ``other_xy``, at least ``wall_m`` from its
-    obstacle vectors, with a straight view of ``other_xy`` that crosses none of them, and
-    at least ``SEEN_APART_M`` from every point of ``visited`` ((m, 2)). Nearest to the
-    other robot first."""
-    other = np.asarray(other_xy, dtype=float).reshape(2)
+    ``MEET_NEAR_M`` and ``reach_m`` from the other robot (``other``: x, y and optionally
+    its heading), at least ``wall_m`` from the map's obstacle vectors, with a straight
+    view of it that crosses none of them, and at least ``SEEN_APART_M`` from every point
+    of ``visited`` ((m, 2)). With a heading and a field of view ``fov_rad`` under a full
+    turn, only where its lidar looks (less ``FOV_MARGIN_RAD`` either side): a robot that
+    stands still sees the waiting one only there. Nearest to the other robot first."""
+    other = np.asarray(other, dtype=float).reshape(-1)
+    xy = other[:2]
     if reach_m <= MEET_NEAR_M:
         return np.zeros((0, 2))
     n = math.ceil(reach_m / MEET_STEP_M)
     ax = np.arange(-n, n + 1) * MEET_STEP_M
     gx, gy = np.meshgrid(ax, ax, indexing="ij")
-    pts = other + np.column_stack([gx.ravel(), gy.ravel()])
-    d = np.hypot(*(pts - other).T)
-    pts, d = pts[(d >= MEET_NEAR_M) & (d <= reach_m)], d[(d >= MEET_NEAR_M) & (d <= reach_m)]
+    pts = xy + np.column_stack([gx.ravel(), gy.ravel()])
+    d = np.hypot(*(pts - xy).T)
+    near = (d >= MEET_NEAR_M) & (d <= reach_m)
+    if len(other) > 2 and fov_rad < 2 * math.pi:
+        bearing = np.arctan2(pts[:, 1] - xy[1], pts[:, 0] - xy[0]) - other[2]
+        off = np.abs((bearing + math.pi) % (2 * math.pi) - math.pi)
+        near &= off <= fov_rad / 2 - FOV_MARGIN_RAD
+    pts, d = pts[near], d[near]
     keep = Room(pmap).allows(pts)
     seen = np.asarray(visited, dtype=float).reshape(-1, 2)
     if len(seen):
@@ -58,7 +76,7 @@ def standpoints(pmap, other_xy, visited, reach_m: float, wall_m: float = MEET_WA
         walls = shapely.MultiLineString([[tuple(a), tuple(b)] for a, b in zip(st, en, strict=True)])
         shapely.prepare(walls)
         clear = shapely.distance(shapely.points(pts), walls) >= wall_m
-        sight = shapely.linestrings(np.stack([pts, np.broadcast_to(other, pts.shape)], axis=1))
+        sight = shapely.linestrings(np.stack([pts, np.broadcast_to(xy, pts.shape)], axis=1))
         clear &= ~shapely.intersects(sight, walls)
         pts, d = pts[clear], d[clear]
     return pts[np.argsort(d, kind="stable")]

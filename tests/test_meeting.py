@@ -106,3 +106,16 @@ def test_a_tour_with_no_standpoint_left_lets_the_solo_coordinator_end():
     assert MissionState.RETURNING in states
     assert states[-1] in (MissionState.RETURNING, MissionState.DONE)
     assert coord.robots["r2"].assignment.kind == AssignmentKind.HOME
+
+
+def test_standpoints_lie_where_the_other_robots_lidar_looks():
+    """A 270-degree lidar facing +x: nothing in its blind quarter behind it (and 15
+    degrees inside the edges); with a full-turn lidar the same place has standpoints."""
+    other = (5.0, 2.0, 0.0)
+    fov = math.radians(270.0)
+    pts = standpoints(_flat(), other, [], reach_m=6.0, wall_m=0.35, fov_rad=fov)
+    bearing = np.degrees(np.arctan2(pts[:, 1] - 2.0, pts[:, 0] - 5.0))
+    assert len(pts) and (np.abs(bearing) <= 135.0 - 15.0 + 1e-6).all()
+    everywhere = standpoints(_flat(), other, [], reach_m=6.0, wall_m=0.35)
+    behind = np.degrees(np.arctan2(everywhere[:, 1] - 2.0, everywhere[:, 0] - 5.0))
+    assert (np.abs(behind) > 150.0).any()
