@@ -780,7 +780,10 @@ class Coordinator:
                 log.info("new frontiers while returning: exploring again")
                 self.state = MissionState.EXPLORING
             if self.state == MissionState.EXPLORING:
-                if not reachable.any() and self.meetings.orders(self, live, reach):
+                # nothing any robot may take now (none left, or those left failed lately):
+                # a robot drawn to a rendezvous tours standpoints in sight of it
+                idle = not np.isfinite(costs).any()
+                if idle and self.rendezvous and self.meetings.orders(self, live, reach):
                     self._no_target_since, self._no_target_cycles = None, 0
                 elif not reachable.any():
                     if self._no_target_since is None:

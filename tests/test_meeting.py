@@ -119,3 +119,33 @@ def test_standpoints_lie_where_the_other_robots_lidar_looks():
     everywhere = standpoints(_flat(), other, [], reach_m=6.0, wall_m=0.35)
     behind = np.degrees(np.arctan2(everywhere[:, 1] - 2.0, everywhere[:, 0] - 5.0))
     assert (np.abs(behind) > 150.0).any()
+
+
+def test_a_solo_robot_whose_frontiers_failed_lately_tours_meanwhile():
+    """Its one frontier failed (excluded for a while): it is not left standing, it is
+    sent to a standpoint; a rendezvous never takes a target it may take."""
+    from agents.coordinator import Coordinator
+    from polyswarm.config import Config
+    from protocols.messages import Pose
+
+    open_l = np.array([(0, 0), (10, 0), (10, 8), (6, 8), (6, 4), (0, 4)], dtype=float)
+    types = [VectorType.OBSTACLE] * 6
+    types[2] = VectorType.FRONTIER  # the upper arm's right side is open
+    coord = Coordinator(Config(), {"r2": (3.0, 2.0, 0.0)})
+    coord.on_robot_map("r2", GridPolyMap(2.0).merge(TypedPolygon(Ring(open_l, types))).map)
+    coord.flush()
+    coord.on_alive("r2", True)
+    coord.on_pose("r2", 1.0, Pose(3.0, 2.0, 0.0))
+    coord.now = 2.0
+    coord.cycle()
+    frontier = coord.robots["r2"].assignment
+    assert frontier is not None and frontier.frontier != ()  # a frontier target first
+    coord.rendezvous = {"r2": OTHER}
+    coord.cycle()
+    assert coord.robots["r2"].assignment.target == frontier.target  # kept while it may
+    coord.robots["r2"].excluded[frontier.target] = math.inf  # it failed there
+    coord.robots["r2"].assignment = None
+    coord.now = 3.0
+    coord.cycle()
+    a = coord.robots["r2"].assignment
+    assert a is not None and a.frontier == (OTHER,)
