@@ -1,12 +1,15 @@
-"""A robot waiting for its frame, with no frontier of its own map left, tours standpoints
-around where its candidate frame puts the nearest robot of the swarm (the ``rendezvous``
-``agents.anchoring`` gives its solo coordinator; ``polyswarm.meeting``).
+"""A robot waiting for its frame, with no frontier of its own map it may take (none left,
+or those left failed lately), tours standpoints around where its candidate frame puts the
+nearest robot of the swarm (the ``rendezvous`` ``agents.anchoring`` gives its solo
+coordinator; ``polyswarm.meeting``).
 
 A frame is committed only where the robots saw each other in three distinct places. A
 waiting robot is drawn towards the other robot along its frontiers; in the rooms world
 (a 30 m lidar explores the flat from the doorways in seconds) the frontiers ran out at
 once, the robots stood where they were, saw each other in one or two places and 5 of 10
-waiting robots were never merged (``docs/merge-log.md``). Each standpoint is at least
+waiting robots were never merged (``docs/merge-log.md``; touring did not change that
+count in 5 launches, and is kept because it adds places to be seen in without a cost
+measured). Each standpoint is at least
 ``SEEN_APART_M`` from the ones before, in sight of the predicted robot, which the robot
 turns to face (its goal's one frontier point) before it reports the standpoint reached.
 A wrong candidate frame puts the other robot where the waiting one finds nobody: the

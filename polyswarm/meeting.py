@@ -25,8 +25,9 @@ from polyswarm.sighting import MIN_SIGHT_M, SEEN_APART_M, Room
 # robots' pose errors: a standpoint at least this far from the other robot
 MEET_NEAR_M = MIN_SIGHT_M + 0.4
 MEET_STEP_M = 0.5  # candidate standpoints on a grid this fine (metres)
-# a standpoint this far from walls: the planner's goals need room, and a robot pressed to
-# a wall shows its lidar little of the other (robot radius and a margin, thesis base)
+# a standpoint this far from walls by default (the coordinator passes its planner's
+# obstacle clearance): a goal needs room, and a robot pressed to a wall shows little of
+# itself to the other's lidar (thesis base: 0.2 m radius and a margin)
 MEET_WALL_M = 0.35
 # the other robot's heading is a candidate frame's guess and it may turn: standpoints this
 # far inside the edges of its lidar's field of view (radians; 15 degrees)
