@@ -17,9 +17,23 @@ L_FLAT = np.array([(0, 0), (10, 0), (10, 8), (6, 8), (6, 4), (0, 4)], dtype=floa
 OTHER = (2.0, 2.0)  # where the candidate frame puts the other robot: in the long arm
 
 
-def _flat() -> GridPolyMap:
-    ring = Ring(L_FLAT, [VectorType.OBSTACLE] * len(L_FLAT))
+def _flat(types=None) -> GridPolyMap:
+    ring = Ring(L_FLAT, types or [VectorType.OBSTACLE] * len(L_FLAT))
     return GridPolyMap(2.0).merge(TypedPolygon(ring)).map
+
+
+def _solo(pmap: GridPolyMap, pose):
+    """A solo coordinator of robot r2, standing at ``pose`` in ``pmap``, its map in."""
+    from agents.coordinator import Coordinator
+    from polyswarm.config import Config
+    from protocols.messages import Pose
+
+    coord = Coordinator(Config(), {"r2": tuple(pose)})
+    coord.on_robot_map("r2", pmap)
+    coord.flush()
+    coord.on_alive("r2", True)
+    coord.on_pose("r2", 1.0, Pose(*pose))
+    return coord
 
 
 def test_standpoints_are_in_sight_within_reach_and_off_the_walls():
@@ -52,18 +66,10 @@ def test_no_standpoint_when_the_lidar_reaches_less_than_a_sighting_needs():
 def test_a_solo_robot_with_no_frontier_left_tours_standpoints_in_sight_of_the_rendezvous():
     """The solo coordinator of a waiting robot whose map is explored: drawn to a
     rendezvous, it is sent to a standpoint facing it, and after reporting it reached to
-    one at least ``SEEN_APART_M`` from the first; without a rendezvous it goes home."""
-    from agents.coordinator import Coordinator
-    from polyswarm.config import Config
-    from protocols.messages import AssignmentKind, Pose, RobotState, RobotStatus
+    one at least ``SEEN_APART_M`` from the first."""
+    from protocols.messages import AssignmentKind, RobotState, RobotStatus
 
-    cfg = Config()
-    coord = Coordinator(cfg, {"r2": (8.0, 6.0, 0.0)})
-    flat = _flat()
-    coord.on_robot_map("r2", flat)
-    coord.flush()
-    coord.on_alive("r2", True)
-    coord.on_pose("r2", 1.0, Pose(8.0, 6.0, 0.0))
+    coord = _solo(_flat(), (8.0, 6.0, 0.0))
     coord.rendezvous = {"r2": OTHER}
     orders = []
     for step in range(2, 40):
@@ -85,16 +91,10 @@ def test_a_solo_robot_with_no_frontier_left_tours_standpoints_in_sight_of_the_re
 def test_a_tour_with_no_standpoint_left_lets_the_solo_coordinator_end():
     """Every standpoint visited: the robot goes home, and is not called back at every
     cycle while the rendezvous stays where it was."""
-    from agents.coordinator import Coordinator
     from agents.meeting import _Tour
-    from polyswarm.config import Config
-    from protocols.messages import AssignmentKind, MissionState, Pose
+    from protocols.messages import AssignmentKind, MissionState
 
-    coord = Coordinator(Config(), {"r2": (8.0, 6.0, 0.0)})
-    coord.on_robot_map("r2", _flat())
-    coord.flush()
-    coord.on_alive("r2", True)
-    coord.on_pose("r2", 1.0, Pose(8.0, 6.0, 0.0))
+    coord = _solo(_flat(), (8.0, 6.0, 0.0))
     coord.rendezvous = {"r2": OTHER}
     tour = coord.meetings.tours.setdefault("r2", _Tour())
     tour.visited = [tuple(p) for p in standpoints(_flat(), OTHER, [], 6.0)]  # all of them
@@ -124,18 +124,9 @@ def test_standpoints_lie_where_the_other_robots_lidar_looks():
 def test_a_solo_robot_whose_frontiers_failed_lately_tours_meanwhile():
     """Its one frontier failed (excluded for a while): it is not left standing, it is
     sent to a standpoint; a rendezvous never takes a target it may take."""
-    from agents.coordinator import Coordinator
-    from polyswarm.config import Config
-    from protocols.messages import Pose
-
-    open_l = np.array([(0, 0), (10, 0), (10, 8), (6, 8), (6, 4), (0, 4)], dtype=float)
-    types = [VectorType.OBSTACLE] * 6
+    types = [VectorType.OBSTACLE] * len(L_FLAT)
     types[2] = VectorType.FRONTIER  # the upper arm's right side is open
-    coord = Coordinator(Config(), {"r2": (3.0, 2.0, 0.0)})
-    coord.on_robot_map("r2", GridPolyMap(2.0).merge(TypedPolygon(Ring(open_l, types))).map)
-    coord.flush()
-    coord.on_alive("r2", True)
-    coord.on_pose("r2", 1.0, Pose(3.0, 2.0, 0.0))
+    coord = _solo(_flat(types), (3.0, 2.0, 0.0))
     coord.now = 2.0
     coord.cycle()
     frontier = coord.robots["r2"].assignment
