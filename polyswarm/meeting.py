@@ -18,6 +18,7 @@ import math
 import numpy as np
 import shapely
 
+from polyswarm.navgraph import clear_of
 from polyswarm.polymap import VectorType
 from polyswarm.sighting import MIN_SIGHT_M, SEEN_APART_M, Room
 
@@ -74,9 +75,9 @@ def standpoints(
         return pts
     st, en, _ = pmap.vectors([VectorType.OBSTACLE])
     if len(st):
+        clear = clear_of(pts, st, en, wall_m)
         walls = shapely.MultiLineString([[tuple(a), tuple(b)] for a, b in zip(st, en, strict=True)])
         shapely.prepare(walls)
-        clear = shapely.distance(shapely.points(pts), walls) >= wall_m
         sight = shapely.linestrings(np.stack([pts, np.broadcast_to(xy, pts.shape)], axis=1))
         clear &= ~shapely.intersects(sight, walls)
         pts, d = pts[clear], d[clear]
