@@ -20,7 +20,7 @@ import shapely
 
 from polyswarm.navgraph import clear_of
 from polyswarm.polymap import VectorType
-from polyswarm.sighting import MIN_SIGHT_M, SEEN_APART_M, Room
+from polyswarm.sighting import BODY_M, MIN_SIGHT_M, SEEN_APART_M, WALL_CLEAR_M, Room
 
 # nearer than this a sighting's bearing says nothing (MIN_SIGHT_M), plus a margin for the
 # robots' pose errors: a standpoint at least this far from the other robot
@@ -33,6 +33,13 @@ MEET_WALL_M = 0.35
 # the other robot's heading is a candidate frame's guess and it may turn: standpoints this
 # far inside the edges of its lidar's field of view (radians; 15 degrees)
 FOV_MARGIN_RAD = math.radians(15.0)
+# a sighting counts only where the return the robot makes, and the space a robot's width
+# behind it, lie WALL_CLEAR_M from the viewer's walls (``polyswarm.sighting.seen_where``):
+# the return is up to BODY_M nearer than the robot's pose, so the stretch from BODY_M
+# before it to 2 BODY_M past it, along the line of sight, is checked at these points
+# (in BODY_M). In the rooms world 3 of 5 standpoints reached lay 0.4-0.6 m from a wall,
+# where the other robot's sightings of the waiting one could not count (seed 0, c471ed9)
+SIGHT_SPAN = (-1.0, 0.0, 1.0, 2.0)
 
 
 def standpoints(
@@ -46,10 +53,12 @@ def standpoints(
     """Candidate standpoints (n, 2) in ``pmap``'s explored free space: between
     ``MEET_NEAR_M`` and ``reach_m`` from the other robot (``other``: x, y and optionally
     its heading), at least ``wall_m`` from the map's obstacle vectors, with a straight
-    view of it that crosses none of them, and at least ``SEEN_APART_M`` from every point
-    of ``visited`` ((m, 2)). With a heading and a field of view ``fov_rad`` under a full
-    turn, only where its lidar looks (less ``FOV_MARGIN_RAD`` either side): a robot that
-    stands still sees the waiting one only there. Nearest to the other robot first."""
+    view of it that crosses none of them. With a heading and a field of view ``fov_rad``
+    under a full turn, only where its lidar looks (less ``FOV_MARGIN_RAD`` either side):
+    a robot that stands still sees the waiting one only there. Of those, only the ones
+    where the other robot's sighting would count (``countable``) if the map has any;
+    and at least ``SEEN_APART_M`` from every point of ``visited`` ((m, 2)). Nearest to
+    the other robot first."""
     other = np.asarray(other, dtype=float).reshape(-1)
     xy = other[:2]
     if reach_m <= MEET_NEAR_M:
@@ -66,19 +75,36 @@ def standpoints(
         near &= off <= fov_rad / 2 - FOV_MARGIN_RAD
     pts, d = pts[near], d[near]
     keep = Room(pmap).allows(pts)
-    seen = np.asarray(visited, dtype=float).reshape(-1, 2)
-    if len(seen):
-        apart = np.hypot(*(pts[:, None, :] - seen[None, :, :]).transpose(2, 0, 1))
-        keep &= (apart >= SEEN_APART_M).all(axis=1)
     pts, d = pts[keep], d[keep]
-    if len(pts) == 0:
-        return pts
     st, en, _ = pmap.vectors([VectorType.OBSTACLE])
-    if len(st):
+    if len(pts) and len(st):
         clear = clear_of(pts, st, en, wall_m)
         walls = shapely.MultiLineString([[tuple(a), tuple(b)] for a, b in zip(st, en, strict=True)])
         shapely.prepare(walls)
         sight = shapely.linestrings(np.stack([pts, np.broadcast_to(xy, pts.shape)], axis=1))
         clear &= ~shapely.intersects(sight, walls)
         pts, d = pts[clear], d[clear]
+        counts = countable(pts, xy, st, en)
+        if counts.any():  # else the waiting robot may still see the other from there
+            pts, d = pts[counts], d[counts]
+    seen = np.asarray(visited, dtype=float).reshape(-1, 2)
+    if len(pts) and len(seen):
+        apart = np.hypot(*(pts[:, None, :] - seen[None, :, :]).transpose(2, 0, 1))
+        keep = (apart >= SEEN_APART_M).all(axis=1)
+        pts, d = pts[keep], d[keep]
     return pts[np.argsort(d, kind="stable")]
+
+
+def countable(pts: np.ndarray, other_xy, st: np.ndarray, en: np.ndarray) -> np.ndarray:
+    """Which standpoints ``pts`` (n, 2) keep the line of sight from ``other_xy``, from
+    ``BODY_M`` before each to ``2 BODY_M`` past it, ``WALL_CLEAR_M`` from the walls
+    (``st``, ``en``): where the other robot's sighting of the waiting one would count."""
+    pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+    if not len(pts):
+        return np.zeros(0, dtype=bool)
+    u = pts - np.asarray(other_xy, dtype=float)[:2]
+    u /= np.maximum(np.hypot(u[:, 0], u[:, 1]), 1e-9)[:, None]
+    ok = np.ones(len(pts), dtype=bool)
+    for k in SIGHT_SPAN:
+        ok &= clear_of(pts + k * BODY_M * u, st, en, WALL_CLEAR_M)
+    return ok

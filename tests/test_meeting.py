@@ -8,9 +8,9 @@ import math
 import numpy as np
 import shapely
 
-from polyswarm.meeting import MEET_NEAR_M, standpoints
+from polyswarm.meeting import MEET_NEAR_M, countable, standpoints
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
-from polyswarm.sighting import SEEN_APART_M
+from polyswarm.sighting import BODY_M, SEEN_APART_M, WALL_CLEAR_M
 
 # an L: a 10 m x 4 m arm along x, and a 4 m x 8 m arm up from its right end
 L_FLAT = np.array([(0, 0), (10, 0), (10, 8), (6, 8), (6, 4), (0, 4)], dtype=float)
@@ -50,6 +50,34 @@ def test_standpoints_are_in_sight_within_reach_and_off_the_walls():
     for x, y in pts:
         if y > 4.0:
             assert (x - 2.0) * (4.0 - 2.0) - (y - 2.0) * (6.0 - 2.0) >= -1e-9
+
+
+def test_standpoints_are_where_the_other_robots_sighting_counts():
+    """The sighting test (``polyswarm.sighting.seen_where``) wants the return and a robot's
+    width behind it WALL_CLEAR_M from walls: every standpoint keeps its line of sight
+    from BODY_M before it to 2 BODY_M past it that far from the flat's walls."""
+    pts = standpoints(_flat(), OTHER, [], reach_m=6.0, wall_m=0.35)
+    assert len(pts) > 5
+    walls = shapely.Polygon(L_FLAT).exterior
+    u = (pts - OTHER) / np.hypot(*(pts - OTHER).T)[:, None]
+    for k in np.linspace(-1.0, 2.0, 7):
+        span = pts + k * BODY_M * u
+        assert min(walls.distance(shapely.Point(p)) for p in span) >= WALL_CLEAR_M - 1e-9
+    # (4.5, 0.5) is 0.35 m inside the wall y = 0 and in sight: a standpoint to drive to,
+    # but the line of sight past it reaches 0.2 m from that wall
+    st, en = L_FLAT, np.roll(L_FLAT, -1, axis=0)
+    assert not countable(np.array([(4.5, 0.5)]), OTHER, st, en)[0]
+    assert countable(np.array([(5.0, 2.0)]), OTHER, st, en)[0]
+
+
+def test_standpoints_fall_back_where_no_sighting_could_count():
+    """A corridor 1 m wide leaves no place WALL_CLEAR_M from both walls: the standpoints
+    in sight are still offered (the waiting robot may see the other one from there)."""
+    corridor = np.array([(0, 0), (12, 0), (12, 1), (0, 1)], dtype=float)
+    pmap = GridPolyMap(2.0).merge(TypedPolygon(Ring(corridor, [VectorType.OBSTACLE] * 4))).map
+    pts = standpoints(pmap, (1.0, 0.5), [], reach_m=6.0, wall_m=0.35)
+    assert len(pts) > 0
+    assert not countable(pts, (1.0, 0.5), corridor, np.roll(corridor, -1, axis=0)).any()
 
 
 def test_standpoints_keep_apart_from_those_visited():
