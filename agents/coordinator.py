@@ -41,7 +41,6 @@ import numpy as np
 from agents import persist
 from agents.meeting import Meetings
 from agents.merger import Merged, MergeJob, MergeLostError, MergeProcess, merge_step
-from agents.parking import Parking
 from agents.replay import Replayed, ReplayPool
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
@@ -253,7 +252,6 @@ class Coordinator:
         # candidate frame puts the nearest robot of the swarm (and the way that one faces)
         self.rendezvous: dict[str, tuple[float, ...]] = {}
         self.meetings = Meetings(cfg)  # their tours once no frontier is left
-        self.parking = Parking(cfg)  # idle robots out of passages while frames are pending
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -790,8 +788,6 @@ class Coordinator:
                 elif not reachable.any():
                     if self._no_target_since is None:
                         self._no_target_since = self.now
-                    if self.frames_pending:  # they may need to get past the idle ones
-                        self.parking.orders(self, live, reach)
                     # every robot's map merged up to what it announced: nothing in flight;
                     # and some robot on the graph (not one at the tip of its first scan)
                     in_flight = any(r.behind_since is not None for r in live)
