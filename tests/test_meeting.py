@@ -63,8 +63,8 @@ def test_standpoints_are_where_the_other_robots_sighting_counts():
     for k in np.linspace(-1.0, 2.0, 7):
         span = pts + k * BODY_M * u
         assert min(walls.distance(shapely.Point(p)) for p in span) >= WALL_CLEAR_M - 1e-9
-    # (4.5, 0.5) is 0.35 m inside the wall y = 0 and in sight: a standpoint to drive to,
-    # but the line of sight past it reaches 0.2 m from that wall
+    # (4.5, 0.5) is 0.5 m from the wall y = 0 and in sight: a standpoint to drive to,
+    # but the line of sight past it reaches 0.19 m from that wall
     st, en = L_FLAT, np.roll(L_FLAT, -1, axis=0)
     assert not countable(np.array([(4.5, 0.5)]), OTHER, st, en)[0]
     assert countable(np.array([(5.0, 2.0)]), OTHER, st, en)[0]
