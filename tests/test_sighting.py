@@ -13,6 +13,7 @@ from polyswarm.polymap import GridPolyMap
 from polyswarm.se2 import compose, inverse, transform_points
 from polyswarm.sighting import (
     CLEAR_UNIT_M,
+    MAX_SEEN_M,
     MIN_CONTRADICTIONS,
     SECTORS,
     WALL_CLEAR_M,
@@ -149,6 +150,22 @@ def test_sightings_count_in_places_not_moments():
     assert distinct_places(mutual_seen(b, still, identity, (hall, hall))) == 1
     assert seen(a, moving, identity, no_wall_test(hall)) == 6
     assert distinct_places(mutual_seen(a, moving, identity, (hall, hall))) == 3
+
+
+def test_a_return_farther_than_the_sighting_range_is_no_sighting():
+    """At 30 m a 2.8-degree sector places its return 0.7 m aside, beyond what tells a
+    robot from a wall: a return where a frame puts the other robot counts as a sighting
+    within ``MAX_SEEN_M`` only."""
+    hall_box = box(-1, -3, 40, 3)
+    hall = GridPolyMap.from_polygons(_typed(hall_box, hall_box.boundary), CELL_M)
+    identity = (0.0, 0.0, 0.0)
+    for x_m, expected in ((MAX_SEEN_M - 3.0, 1), (MAX_SEEN_M + 3.0, 0), (30.0, 0)):
+        viewer, other = Track(), Track()
+        profile = profile_with_a_robot_at((x_m, 0.0), clear_m=45.0)
+        viewer.add(Sighting(0.5, identity, profile))
+        other.add(Sighting(0.0, (x_m, 0.0, 0.0)))
+        other.add(Sighting(1.0, (x_m, 0.0, 0.0)))
+        assert seen(viewer, other, identity, no_wall_test(hall)) == expected, x_m
 
 
 def _scan(pose, others) -> np.ndarray:
