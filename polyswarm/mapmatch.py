@@ -3,13 +3,14 @@
 Robots whose start poses nobody measured build maps in frames of their own. This finds
 the pose of map B's frame in map A's frame, or says why it cannot:
 
-1. *Search.* Both maps are rasterised at ``RESOLUTION_M``: A's walls as a hit score (a
-   Gaussian of the distance to its obstacle vectors) and A's *clear* space (explored, and
-   deeper inside it than ``CLEAR_M``); B the same. For every heading on a
-   ``HEADING_STEP_RAD`` grid, one FFT correlation scores every translation at once:
-   B's walls on A's walls, minus ``CONFLICT_WEIGHT`` x (B's walls in A's clear space +
-   A's walls in B's clear space). Free space is what makes PolyMaps good at this: a
-   wall seen through space the other robot drove through is evidence against a pose.
+1. *Search* (``polyswarm.mapsearch``). Both maps are rasterised at ``RESOLUTION_M``:
+   A's walls as a hit score (a Gaussian of the distance to its obstacle vectors) and
+   A's *clear* space (explored, and deeper inside it than ``CLEAR_M``); B the same. For
+   every heading on a ``HEADING_STEP_RAD`` grid, every translation is scored: B's walls
+   on A's walls, minus ``CONFLICT_WEIGHT`` x (B's walls in A's clear space + A's walls
+   in B's clear space); coarse first, the best candidates then at full resolution.
+   Free space is what makes PolyMaps good at this: a wall seen through space the other
+   robot drove through is evidence against a pose.
 2. *Refine.* The best peaks (``PEAKS``, apart by ``PEAK_APART_M``) are refined by
    point-to-line ICP of B's wall points on A's walls.
 3. *Verify.* At the refined pose: the explored overlap, the length of wall both maps
@@ -37,23 +38,25 @@ import numpy as np
 import shapely
 import shapely.affinity
 from PIL import Image, ImageDraw
-from scipy import fft
 from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
 from polyswarm.errors import PolyswarmError
 from polyswarm.icp import sample_vectors
+from polyswarm.mapsearch import (  # noqa: F401 (the search's constants, used here and re-exported)
+    CONFLICT_WEIGHT,
+    HEADING_STEP_RAD,
+    PEAK_APART_M,
+    PEAKS,
+    RESOLUTION_M,
+)
+from polyswarm.mapsearch import close as _close
+from polyswarm.mapsearch import search as _search
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
 from polyswarm.se2 import compose, inverse, transform_points, wrap
 
-RESOLUTION_M = 0.10  # search raster: a 2-degree heading step moves a point 10 m out 0.35 m
-HEADING_STEP_RAD = math.radians(2.0)  # every heading is tried: no Manhattan assumption
 HIT_SIGMA_M = 0.15  # a wall point this far from the other's wall scores exp(-1/2)
 CLEAR_M = 0.30  # explored space deeper than this inside is "clear" (noise, corners)
-CONFLICT_WEIGHT = 2.0  # a wall in the other's clear space costs two agreeing points
-PEAKS = 6  # candidate poses refined by ICP
-PEAK_APART_M = 1.0  # candidates closer than this (same heading) are one peak
-PEAK_POOL = 400  # the best raster positions of a heading that peaks are picked from
 WALL_STEP_M = 0.10  # wall points are sampled this far apart (agreeing length = count x step)
 
 ICP_ITERATIONS = 25
@@ -209,83 +212,6 @@ def _rasterise(pmap: GridPolyMap, lo: np.ndarray, shape) -> np.ndarray:
             if len(px) >= 3:
                 draw.polygon(px, fill=1 if k == 0 else 0)
     return np.asarray(img, dtype=bool).T
-
-
-def _points_raster(xy: np.ndarray, shape) -> np.ndarray:
-    img = np.zeros(shape)
-    ij = np.floor(xy / RESOLUTION_M).astype(int)
-    np.add.at(img, (ij[:, 0], ij[:, 1]), 1.0)
-    return img
-
-
-# -- search ------------------------------------------------------------------------------
-
-
-def _search(a: _MapView, b: _MapView) -> list[tuple[float, np.ndarray]]:
-    """The best (score, pose of B's frame in A's) peaks over every heading."""
-    b_clear_xy = (np.argwhere(b.clear > 0) + 0.5) * RESOLUTION_M + b.lo
-    b_center = b.walls.mean(axis=0)
-    # B rotated about its centre: its points then fit in a square of its radius
-    pts = np.concatenate([b.walls, b_clear_xy]) - b_center
-    radius = float(np.hypot(pts[:, 0], pts[:, 1]).max())
-    nb = int(np.ceil(2 * radius / RESOLUTION_M)) + 2
-    shape = (a.hit.shape[0] + nb, a.hit.shape[1] + nb)
-    fshape = [fft.next_fast_len(n, real=True) for n in shape]
-    fa_walls = fft.rfft2(a.hit - CONFLICT_WEIGHT * a.clear, fshape)
-    a_walls_px = _points_raster(a.walls - a.lo, a.hit.shape)
-    fa_wall_pts = fft.rfft2(a_walls_px, fshape)
-    found: list[tuple[float, np.ndarray]] = []
-    for th in np.arange(-math.pi, math.pi, HEADING_STEP_RAD):
-        c, s = math.cos(th), math.sin(th)
-        rot = np.array([[c, -s], [s, c]])
-        off = np.full(2, radius + RESOLUTION_M)
-        bw = (b.walls - b_center) @ rot.T + off
-        bc = (b_clear_xy - b_center) @ rot.T + off
-        fbw = fft.rfft2(_points_raster(bw, (nb, nb)), fshape)
-        fbc = fft.rfft2(_points_raster(bc, (nb, nb)), fshape)
-        # correlation: B's walls on A's hit - conflicts; A's wall points in B's clear space
-        corr = fft.irfft2(
-            fa_walls * np.conj(fbw) - CONFLICT_WEIGHT * fa_wall_pts * np.conj(fbc), fshape
-        )
-        peaks = _peaks(corr, PEAKS)
-        for score, (di, dj) in peaks:
-            # B's point p (own frame) lands at A-raster index of (rot (p - c) + off) + d
-            d = np.array([di, dj], dtype=float)
-            d = np.where(d > np.array(fshape) / 2, d - np.array(fshape), d)
-            t = a.lo + d * RESOLUTION_M + off - rot @ b_center
-            found.append((score, np.array([t[0], t[1], th])))
-    found.sort(key=lambda f: -f[0])
-    return _distinct(found, PEAKS * 3)
-
-
-def _peaks(corr: np.ndarray, k: int) -> list[tuple[float, tuple[int, int]]]:
-    """The ``k`` best positive maxima of ``corr``, ``PEAK_APART_M`` apart."""
-    flat = corr.ravel()
-    top = np.argpartition(flat, -PEAK_POOL)[-PEAK_POOL:]
-    top = top[np.argsort(flat[top])[::-1]]
-    apart = PEAK_APART_M / RESOLUTION_M
-    out: list[tuple[float, tuple[int, int]]] = []
-    for i in top:
-        if flat[i] <= 0 or len(out) == k:
-            break
-        ij = np.unravel_index(i, corr.shape)
-        if all(math.hypot(ij[0] - o[0], ij[1] - o[1]) >= apart for _, o in out):
-            out.append((float(flat[i]), ij))
-    return out
-
-
-def _distinct(found: list, k: int) -> list[tuple[float, np.ndarray]]:
-    out: list[tuple[float, np.ndarray]] = []
-    for score, pose in found:
-        if all(not _close(pose, p, PEAK_APART_M, 2 * HEADING_STEP_RAD) for _, p in out):
-            out.append((score, pose))
-            if len(out) == k:
-                break
-    return out
-
-
-def _close(p: np.ndarray, q: np.ndarray, d_m: float, d_rad: float) -> bool:
-    return bool(np.hypot(*(p[:2] - q[:2])) < d_m and abs(wrap(p[2] - q[2])) < d_rad)
 
 
 # -- refine and verify -------------------------------------------------------------------
