@@ -27,7 +27,9 @@ process, the two searches one after the other on each pair, 2026-11-28), ``match
 gave the verdict of the one-pass fine search in all 158 pairs (116 without the
 symmetric-image check, 42 with it), and the same pose in every pair it accepted or
 proposed. A match took 0.9 s against 7.1 s at the median on loop and cross, 0.4 against
-1.4 s on maze and office, 2.0 against 20.3 s on the 80 m loop.
+1.4 s on maze and office, 2.0 against 20.3 s on the 80 m loop. ``search_fine`` is that
+one-pass search, kept as the reference (``tests/test_mapsearch.py``,
+``examples/map_search_side_by_side.py``).
 """
 
 from __future__ import annotations
@@ -97,6 +99,34 @@ def search(a, b) -> list[tuple[float, np.ndarray]]:
         score, dd = fine.best(heads[h], COARSE * d)
         t = a.lo + dd * res + off - _rotation(heads[h]) @ b_center
         found.append((score, np.array([t[0], t[1], heads[h]])))
+    found.sort(key=lambda f: -f[0])
+    return distinct(found, PEAKS * 3)
+
+
+def search_fine(a, b) -> list[tuple[float, np.ndarray]]:
+    """What ``search`` finds, in one pass: every heading, every translation at the fine
+    resolution, one FFT correlation a heading (the search until 2026-11-28; the
+    reference ``search`` is checked against, 3-10 times slower)."""
+    b_clear_xy = (np.argwhere(b.clear > 0) + 0.5) * RESOLUTION_M + b.lo
+    b_center = b.walls.mean(axis=0)
+    pts = np.concatenate([b.walls, b_clear_xy]) - b_center
+    radius = float(np.hypot(pts[:, 0], pts[:, 1]).max())
+    nb = int(np.ceil(2 * radius / RESOLUTION_M)) + 2
+    fshape = [fft.next_fast_len(n + nb, real=True) for n in a.hit.shape]
+    fa = fft.rfft2(a.hit - CONFLICT_WEIGHT * a.clear, fshape)
+    fap = fft.rfft2(points_raster(a.walls - a.lo, a.hit.shape), fshape)
+    off = np.full(2, radius + RESOLUTION_M)
+    found = []
+    for th in np.arange(-math.pi, math.pi, HEADING_STEP_RAD):
+        rot = _rotation(th)
+        fbw = fft.rfft2(points_raster((b.walls - b_center) @ rot.T + off, (nb, nb)), fshape)
+        fbc = fft.rfft2(points_raster((b_clear_xy - b_center) @ rot.T + off, (nb, nb)), fshape)
+        corr = fft.irfft2(fa * np.conj(fbw) - CONFLICT_WEIGHT * fap * np.conj(fbc), fshape)
+        for score, ij in peaks(corr, PEAKS, PEAK_APART_M / RESOLUTION_M):
+            d = np.array(ij, dtype=float)
+            d = np.where(d > np.array(fshape) / 2, d - np.array(fshape), d)
+            t = a.lo + d * RESOLUTION_M + off - rot @ b_center
+            found.append((score, np.array([t[0], t[1], th])))
     found.sort(key=lambda f: -f[0])
     return distinct(found, PEAKS * 3)
 
