@@ -68,6 +68,7 @@ from polyswarm.mapmatch import (
 )
 from polyswarm.se2 import compose, inverse, transform_points
 from polyswarm.sighting import (
+    MAX_SEEN_M,
     MIN_CONTRADICTIONS,
     Room,
     Sighting,
@@ -364,7 +365,7 @@ class Anchoring:
 
     def _took(self, rid: str, w: _Waiting, done: Future) -> None:
         try:
-            m, seen = done.result()
+            m, seen, seen_any_range = done.result()
         except (MatchError, PolyswarmError) as e:
             log.info("map of %s not matched: %s", rid, e)
             return
@@ -374,12 +375,18 @@ class Anchoring:
         w.matches += 1
         before = w.frames.pose
         w.frames.add(m, seen)
+        far = (
+            f" ({seen_any_range} counting sightings beyond {MAX_SEEN_M:.0f} m)"
+            if seen_any_range != seen
+            else ""
+        )
         log.info(
-            "map of %s against the merged map (match %d): %s, seen %d time(s)%s",
+            "map of %s against the merged map (match %d): %s, seen %d time(s)%s%s",
             rid,
             w.matches,
             m.summary(),
             seen,
+            far,
             "" if m.accepted else " (refused)",
         )
         if before is None and w.frames.pose is not None:
@@ -416,8 +423,10 @@ class Anchoring:
         def contradicts(frame: np.ndarray) -> bool:
             return count(frame) >= MIN_CONTRADICTIONS
 
-        def seen_at(frame: np.ndarray) -> int:  # places in the shared frame, all robots'
-            return distinct_places(np.vstack([mutual_seen(t, mine, frame, maps) for t in theirs]))
+        def seen_at(frame: np.ndarray, max_range_m: float = MAX_SEEN_M) -> int:
+            """Places in the shared frame, all robots' sightings up to ``max_range_m``."""
+            places = [mutual_seen(t, mine, frame, maps, max_range_m) for t in theirs]
+            return distinct_places(np.vstack(places))
 
         return contradicts, seen_at
 
@@ -477,9 +486,12 @@ def _contradiction_count(theirs: list[Track], mine: Track, maps):
     return count
 
 
-def _match(merged, own, contradicts, seen_at) -> tuple[MapMatch, int]:
+def _match(merged, own, contradicts, seen_at) -> tuple[MapMatch, int, int]:
     """``match_maps`` of a robot's map on the merged map (its images unchecked: two more
-    searches, three times the time, to tell what the sightings tell), and the robots'
-    sightings of each other at the pose it found (0 without sightings)."""
+    searches, three times the time, to tell what the sightings tell), and the places the
+    robots saw each other at the pose it found (0 without sightings): within
+    ``MAX_SEEN_M``, and at any range (for the log only)."""
     m = match_maps(merged, own, contradicts, images=False)
-    return m, (seen_at(m.pose) if seen_at is not None and m.proposed else 0)
+    if seen_at is None or not m.proposed:
+        return m, 0, 0
+    return m, seen_at(m.pose), seen_at(m.pose, math.inf)

@@ -297,7 +297,11 @@ def seen(viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.
 
 
 def seen_where(
-    viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.ndarray]
+    viewer: Track,
+    other: Track,
+    frame,
+    no_wall: Callable[[np.ndarray], np.ndarray],
+    max_range_m: float = MAX_SEEN_M,
 ) -> np.ndarray:
     """``seen``'s moments as the places (n, 2) (metres, the viewer's frame) where the
     frame put the other robot.
@@ -305,12 +309,13 @@ def seen_where(
     ``no_wall``: (n, 2) points in the viewer's frame -> True where a point lies in the
     viewer's explored space farther than ``WALL_CLEAR_M`` from its walls
     (``no_wall_test``). A frame's prediction that meets an unexplained return again and
-    again is positive evidence; silence (no return, or a wall) is none."""
+    again is positive evidence; silence (no return, or a wall) is none. Predictions
+    farther than ``max_range_m`` are not looked at (``MAX_SEEN_M``)."""
     pred = _predictions(viewer, other, frame)
     if pred is None:
         return np.zeros((0, 2))
     poses, clear, p, d, bearing = pred
-    near = d <= MAX_SEEN_M
+    near = d <= max_range_m
     if not near.any():
         return np.zeros((0, 2))
     poses, clear, p, d, bearing = poses[near], clear[near], p[near], d[near], bearing[near]
@@ -361,13 +366,13 @@ def contradictions(a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = 
     return unseen(a, b, frame, ra) + unseen(b, a, inverse(frame), rb)
 
 
-def mutual_seen(a: Track, b: Track, frame, maps) -> np.ndarray:
+def mutual_seen(a: Track, b: Track, frame, maps, max_range_m: float = MAX_SEEN_M) -> np.ndarray:
     """Where either robot saw the other where ``frame`` (B's frame in A's) puts it
-    (``seen`` both ways): the seen robot's places (n, 2), metres, in A's frame. ``maps``:
-    A's and B's GridPolyMaps. Count them with ``distinct_places``."""
+    (``seen`` both ways, up to ``max_range_m``): the seen robot's places (n, 2), metres,
+    in A's frame. ``maps``: A's and B's GridPolyMaps. Count them with ``distinct_places``."""
     frame = np.asarray(frame, dtype=float)
-    b_seen = seen_where(a, b, frame, no_wall_test(maps[0]))  # B, in A's frame
-    a_seen = seen_where(b, a, inverse(frame), no_wall_test(maps[1]))  # A, in B's frame
+    b_seen = seen_where(a, b, frame, no_wall_test(maps[0]), max_range_m)  # B, in A's frame
+    a_seen = seen_where(b, a, inverse(frame), no_wall_test(maps[1]), max_range_m)  # A, in B's
     return np.vstack([b_seen, transform_points(frame, a_seen)])
 
 

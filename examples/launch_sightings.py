@@ -1,0 +1,95 @@
+"""What the sighting range cap changed in whole launches: matches scored by ground truth.
+
+The coordinator logs every match of a waiting robot's map with the places the robots
+saw each other where it puts them: within ``polyswarm.sighting.MAX_SEEN_M``, and, when
+that differs, at any range ("seen 2 time(s) (4 counting sightings beyond 15 m)").
+This reads run folders of ``polyswarm bench explore --unknown-start`` (their
+``config.toml`` holds the true starts; nobody told the robots) and scores each proposed
+pose against the truth: right within 1 m and 5 degrees, else wrong. It counts the
+matches where the cap took a pose below ``MIN_SEEN`` places, right and wrong.
+
+    .venv/bin/python examples/launch_sightings.py /tmp/us2/*unknown* --out result.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from polyswarm.mapmatch import MIN_SEEN, frame_error
+from polyswarm.se2 import compose, inverse
+
+RIGHT_M, RIGHT_RAD = 1.0, math.radians(5.0)  # bench merge's WRONG_M, WRONG_RAD
+_MATCH = re.compile(
+    r"map of (r\d+) against the merged map \(match (\d+)\): pose \(([-\d.]+) m, ([-\d.]+) m, "
+    r"([-\d.]+) deg\).*?, seen (\d+) time\(s\)(?: \((\d+) counting sightings beyond)?"
+)
+
+
+def _log_records(path: Path) -> list[str]:
+    """The log's records, rich's wrapped continuation lines joined back on (runs of
+    spaces made one: the wrapping pads lines)."""
+    out: list[str] = []
+    for line in path.read_text(errors="replace").splitlines():
+        if line.startswith(" " * 10) and out:
+            out[-1] += " " + line.strip()
+        else:
+            out.append(line)
+    return [re.sub(r"\s+", " ", r) for r in out]
+
+
+def run_matches(folder: Path) -> list[dict]:
+    """Every logged match of a run with its sightings and its truth."""
+    cfg = tomllib.loads((folder / "config.toml").read_text())
+    starts = np.array(cfg["sim"]["start_poses"], dtype=float)
+    rows = []
+    for record in _log_records(folder / "logs" / "coordinator.log"):
+        for m in _MATCH.finditer(record):
+            rid, k = m.group(1), int(m.group(2))
+            pose = np.array([float(m.group(3)), float(m.group(4)), math.radians(float(m.group(5)))])
+            i = int(rid[1:]) - 1
+            truth = compose(inverse(starts[0]), starts[i])
+            e_m, e_rad = frame_error(pose, truth)
+            seen = int(m.group(6))
+            rows.append(
+                {
+                    "run": folder.name,
+                    "robot": rid,
+                    "match": k,
+                    "right": e_m <= RIGHT_M and e_rad <= RIGHT_RAD,
+                    "seen": seen,
+                    "seen_any_range": int(m.group(7)) if m.group(7) else seen,
+                }
+            )
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", nargs="+", type=Path, help="run folders of bench explore")
+    ap.add_argument("--out", help="write the counts (JSON) here")
+    args = ap.parse_args()
+    rows = [r for f in args.runs for r in run_matches(f)]
+    summary = {}
+    for kind, right in (("right", True), ("wrong", False)):
+        sel = [r for r in rows if r["right"] == right]
+        summary[kind] = {
+            "matches": len(sel),
+            "seen_enough": sum(r["seen"] >= MIN_SEEN for r in sel),
+            "seen_enough_at_any_range": sum(r["seen_any_range"] >= MIN_SEEN for r in sel),
+            "cap_changed_count": sum(r["seen"] != r["seen_any_range"] for r in sel),
+        }
+    out = {"runs": [f.name for f in args.runs], "places_needed": MIN_SEEN, **summary}
+    print(json.dumps(out, indent=1))
+    if args.out:
+        Path(args.out).write_text(json.dumps({**out, "matches": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
