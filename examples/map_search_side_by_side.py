@@ -29,11 +29,13 @@ import numpy as np
 def _pairs(world: str, seed: int, step: int):
     from polyswarm.benchmarks.merge import _snapshots
     from polyswarm.config import Config
+    from polyswarm.se2 import compose, inverse
 
-    moments, _, _ = _snapshots(world, seed, 3, Config())
+    moments, starts, _ = _snapshots(world, seed, 3, Config())
     for t, maps in moments[::step]:
         for k in range(1, len(maps)):
-            yield t, k, maps[0], maps[k]
+            truth = compose(inverse(np.asarray(starts[0])), np.asarray(starts[k]))
+            yield t, k, maps[0], maps[k], truth
 
 
 def _match(a, b, search, images: bool):
@@ -47,6 +49,24 @@ def _match(a, b, search, images: bool):
     return m, time.perf_counter() - t0
 
 
+def _scored(m, truth) -> dict:
+    from polyswarm.mapmatch import frame_error
+
+    e_m, e_rad = frame_error(m.pose, truth)
+    return {
+        "err_m": e_m,
+        "err_deg": float(np.degrees(e_rad)),
+        "accepted": bool(m.accepted),
+        "proposed": bool(m.proposed),
+        "reason": m.reason,
+    }
+
+
+def _wrong(m: dict) -> bool:
+    """An accepted or proposed pose more than 1 m or 5 degrees off (bench merge's)."""
+    return m["proposed"] and (m["err_m"] > 1.0 or m["err_deg"] > 5.0)
+
+
 def main(out: str, runs: str, step: int = 3, images: bool = False) -> None:
     from polyswarm.mapsearch import search, search_fine
     from polyswarm.se2 import wrap
@@ -55,7 +75,7 @@ def main(out: str, runs: str, step: int = 3, images: bool = False) -> None:
     rows = []
     for run in runs.split(","):
         world, seed = run.rsplit(":", 1)
-        for t, k, a, b in _pairs(world, int(seed), step):
+        for t, k, a, b, truth in _pairs(world, int(seed), step):
             fast, t_fast = _match(a, b, search, images)
             fine, t_fine = _match(a, b, search_fine, images)
             if fast is None or fine is None:
@@ -73,6 +93,9 @@ def main(out: str, runs: str, step: int = 3, images: bool = False) -> None:
                 and fast.reason.split(":")[0] == fine.reason.split(":")[0],
                 "same_pose": bool(np.hypot(d[0], d[1]) < 0.05 and abs(wrap(d[2])) < 1e-3),
                 "fine_accepted_or_proposed": bool(fine.proposed),
+                # each pose against the true frame (metres, degrees), and each verdict
+                "coarse_to_fine": _scored(fast, truth),
+                "fine": _scored(fine, truth),
             }
             rows.append(row)
             print(json.dumps(row), flush=True)
@@ -97,6 +120,8 @@ def main(out: str, runs: str, step: int = 3, images: bool = False) -> None:
         "same_verdict": sum(r["same_verdict"] for r in rows),
         "accepted_or_proposed": len(proposed),
         "same_pose_where_accepted_or_proposed": sum(r["same_pose"] for r in proposed),
+        "wrong_proposed_coarse_to_fine": sum(_wrong(r["coarse_to_fine"]) for r in rows),
+        "wrong_proposed_fine": sum(_wrong(r["fine"]) for r in rows),
         "worlds": by_world,
         "rows": rows,
     }
