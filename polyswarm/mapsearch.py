@@ -21,14 +21,15 @@ So the search runs coarse to fine:
    exactly, ``S(d)`` summed directly over B's wall cells and A's wall cells, at every
    fine translation within a coarse cell of theirs, and the best of each is kept.
 
-On recorded explorations (``bench merge``'s robot maps, 3 robots; office, rooms and
-the procedural loop, cross and maze, 1-2 seeds each, and the thesis's 80 m loop; one
-process, the two searches one after the other on each pair, 2026-11-28), ``match_maps``
-gave the verdict of the one-pass fine search in all 158 pairs (116 without the
-symmetric-image check, 42 with it), and the same pose in every pair it accepted or
-proposed. A match took 0.9 s against 7.1 s at the median on loop and cross, 0.4 against
-1.4 s on maze and office, 2.0 against 20.3 s on the 80 m loop. ``search_fine`` is that
-one-pass search, kept as the reference (``tests/test_mapsearch.py``,
+On recorded explorations (``bench merge``'s robot maps, 3 robots, every third 5 s
+moment; office, rooms and the procedural loop, cross and maze, one seed each, and the
+thesis's 80 m loop; one process, the two searches one after the other on each pair,
+``docs/results/map-search.json``), ``match_maps`` gave the verdict of the one-pass fine
+search in 67 of 68 pairs and the same pose in 57 of the 59 it accepted or proposed (the
+three differences on the 80 m loop, whose corridors fit many poses). A match took 0.6
+against 3.8 s at the median on the loop, 1.0 against 7.0 s on the cross, 0.5 against
+1.4 s on the maze, 1.8 against 18.9 s on the 80 m loop. ``search_fine`` is that one-pass
+search, kept as the reference (``tests/test_mapsearch.py``,
 ``examples/map_search_side_by_side.py``).
 """
 
