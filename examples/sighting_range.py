@@ -51,7 +51,6 @@ def main() -> None:
     cfg = with_profile(Config(), profile)
     counts = {str(c): {"right": [], "wrong": []} for c in CAPS_M}
     reproduced = total = 0
-    default = sighting.MAX_SEEN_M
     for spec in args.runs:
         world, seed = spec.rsplit(":", 1)
         t0 = time.perf_counter()
@@ -66,13 +65,12 @@ def main() -> None:
             pose = np.array(row["ours"]["pose"])
             kind = "wrong" if row["ours"]["found"]["wrong"] else "right"
             for cap in CAPS_M:
-                sighting.MAX_SEEN_M = cap
-                n = sighting.distinct_places(sighting.mutual_seen(mine, theirs, pose, (a, b)))
+                seen = sighting.mutual_seen(mine, theirs, pose, (a, b), max_range_m=cap)
+                n = sighting.distinct_places(seen)
                 counts[str(cap)][kind].append(n)
                 if cap == math.inf:
                     total += 1
                     reproduced += n == row["ours"]["seen"]
-        sighting.MAX_SEEN_M = default
         print(f"{spec}: recorded and counted in {time.perf_counter() - t0:.0f} s")
     need = MIN_SEEN
     table = {

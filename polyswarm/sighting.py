@@ -78,7 +78,9 @@ SEEN_APART_M = 1.5
 # was committed on such sightings (launch at unknown starts, seed 0; replayed: at 30 m).
 # On bench merge's recorded pairs (8 runs, merge-sight-range.json) a 15 m cap kept all 14
 # right poses seen in 3 places and left every one of the 141 wrong poses unseen (3 seen
-# before, one in 3 places); 10 m lost one right pose, 8 m twelve
+# before, one in 3 places); 10 m lost one right pose, 8 m twelve. In 20 launches
+# (launch-sightings.json) it kept two wrong frames from being committed and delayed six
+# robots' right frames by 1-38 matches: along corridors long sightings are real too
 MAX_SEEN_M = 15.0
 ROOM_RES_M = 0.1  # the raster of where a robot can stand
 DISC_STEP_M = 0.2  # the disc around a prediction is tried at places this far apart
