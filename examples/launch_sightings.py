@@ -17,11 +17,13 @@ import argparse
 import json
 import math
 import re
+import sys
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
+from polyswarm.benchmarks.results import machine_meta
 from polyswarm.mapmatch import MIN_SEEN, frame_error
 from polyswarm.se2 import compose, inverse
 
@@ -88,7 +90,8 @@ def main() -> None:
     out = {"runs": [f.name for f in args.runs], "places_needed": MIN_SEEN, **summary}
     print(json.dumps(out, indent=1))
     if args.out:
-        Path(args.out).write_text(json.dumps({**out, "matches": rows}, indent=1))
+        meta = machine_meta() | {"command": " ".join(["python", *sys.argv])}
+        Path(args.out).write_text(json.dumps({**out, "matches": rows, "meta": meta}, indent=1))
 
 
 if __name__ == "__main__":

@@ -18,12 +18,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 
 import numpy as np
 
 from polyswarm import sighting
 from polyswarm.benchmarks.merge import _snapshots
+from polyswarm.benchmarks.results import machine_meta
 from polyswarm.config import Config, with_profile
 from polyswarm.mapmatch import MIN_SEEN
 
@@ -92,6 +94,7 @@ def main() -> None:
         "moments_reproduced": reproduced,
         "moments": total,
         "by_cap_m": table,
+        "meta": machine_meta() | {"command": " ".join(["python", *sys.argv])},
     }
     with open(args.out, "w") as f:
         json.dump(out, f, indent=1)
