@@ -291,12 +291,13 @@ class Planner:
             for m, g in ((~frontier, radius), (frontier, self.frontier_radius))
             if m.any() and g > 0
         ]
-        if len(seen):
-            parts.append(
-                shapely.buffer(
-                    shapely.multipoints(seen), grown_radius(radius), quad_segs=BUFFER_SEGMENTS
-                )
+        if len(seen):  # one disc per point, then one union: the same shape as buffering
+            # the MultiPoint, which GEOS nodes all at once (2,000 points 4-7 s, 0.05 s so;
+            # an agent boxed in by robots it could not tell from walls planned for minutes)
+            discs = shapely.buffer(
+                shapely.points(seen), grown_radius(radius), quad_segs=BUFFER_SEGMENTS
             )
+            parts.append(shapely.union_all(discs))
         return shapely.union_all(parts) if parts else shapely.Polygon()
 
     def _towards(self, part, s_eff, start, goal) -> np.ndarray | None:
