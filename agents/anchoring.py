@@ -68,7 +68,7 @@ from polyswarm.mapmatch import (
 )
 from polyswarm.se2 import compose, inverse, transform_points
 from polyswarm.sighting import (
-    MAX_SEEN_M,
+    FORMER_CAP_M,
     MIN_CONTRADICTIONS,
     Room,
     Sighting,
@@ -231,7 +231,9 @@ class Anchoring:
             ):
                 w.last_match_s = now_s
                 contradicts, seen_at = self._evidence(rid, main)
-                w.matching = self._pool.submit(_match, main.merged, own, contradicts, seen_at)
+                w.matching = self._pool.submit(
+                    _match, main.merged, own, contradicts, seen_at, w.frames.candidate
+                )
             self._rendezvous(rid, w, main)
         return out
 
@@ -365,19 +367,25 @@ class Anchoring:
 
     def _took(self, rid: str, w: _Waiting, done: Future) -> None:
         try:
-            m, seen, seen_any_range = done.result()
-        except (MatchError, PolyswarmError) as e:
-            log.info("map of %s not matched: %s", rid, e)
-            return
+            got: _Matched = done.result()
         except Exception:  # a failed match must not stop the coordinator: logged, retried
             log.exception("matching the map of %s failed", rid)
             return
+        if got.stale and w.frames.candidate is not None:
+            # a wrong candidate would draw the robot to an empty place until a match
+            # proposed another (once 150 s: the maps then matched nowhere else)
+            log.info("candidate frame of %s contradicted by the sightings: forgotten", rid)
+            w.frames.forget_candidate()
+        m = got.match
+        if m is None:
+            log.info("map of %s not matched: %s", rid, got.why)
+            return
         w.matches += 1
         before = w.frames.pose
-        w.frames.add(m, seen)
+        w.frames.add(m, got.seen)
         far = (
-            f" ({seen_any_range} counting sightings beyond {MAX_SEEN_M:.0f} m)"
-            if seen_any_range != seen
+            f" ({got.seen_former} by the former rule: within {FORMER_CAP_M:.0f} m, no arc)"
+            if got.seen_former != got.seen
             else ""
         )
         log.info(
@@ -385,7 +393,7 @@ class Anchoring:
             rid,
             w.matches,
             m.summary(),
-            seen,
+            got.seen,
             far,
             "" if m.accepted else " (refused)",
         )
@@ -423,9 +431,11 @@ class Anchoring:
         def contradicts(frame: np.ndarray) -> bool:
             return count(frame) >= MIN_CONTRADICTIONS
 
-        def seen_at(frame: np.ndarray, max_range_m: float = MAX_SEEN_M) -> int:
-            """Places in the shared frame, all robots' sightings up to ``max_range_m``."""
-            places = [mutual_seen(t, mine, frame, maps, max_range_m) for t in theirs]
+        def seen_at(frame: np.ndarray, former: bool = False) -> int:
+            """Places in the shared frame, all robots' sightings (``former``: by the
+            rule before the arc test, for the log)."""
+            rule = {"max_range_m": FORMER_CAP_M, "arc": False} if former else {}
+            places = [mutual_seen(t, mine, frame, maps, **rule) for t in theirs]
             return distinct_places(np.vstack(places))
 
         return contradicts, seen_at
@@ -486,12 +496,28 @@ def _contradiction_count(theirs: list[Track], mine: Track, maps):
     return count
 
 
-def _match(merged, own, contradicts, seen_at) -> tuple[MapMatch, int, int]:
+@dataclass(frozen=True)
+class _Matched:
+    """What one match of a waiting robot's map found (``_match``)."""
+
+    match: MapMatch | None  # None: no match (``why``)
+    why: str = ""
+    seen: int = 0  # places the robots saw each other at its pose
+    seen_former: int = 0  # the same by the former sighting rule (for the log)
+    stale: bool = False  # the candidate frame it started with is contradicted now
+
+
+def _match(merged, own, contradicts, seen_at, candidate=None) -> _Matched:
     """``match_maps`` of a robot's map on the merged map (its images unchecked: two more
     searches, three times the time, to tell what the sightings tell), and the places the
-    robots saw each other at the pose it found (0 without sightings): within
-    ``MAX_SEEN_M``, and at any range (for the log only)."""
-    m = match_maps(merged, own, contradicts, images=False)
+    robots saw each other at the pose it found (0 without sightings): by the arc test,
+    and by the former rule (``FORMER_CAP_M``, for the log only). ``candidate``: the
+    frame the robot is being sent to meet the others by, checked against the sightings."""
+    stale = candidate is not None and contradicts is not None and contradicts(candidate)
+    try:
+        m = match_maps(merged, own, contradicts, images=False)
+    except (MatchError, PolyswarmError) as e:
+        return _Matched(None, str(e), stale=stale)
     if seen_at is None or not m.proposed:
-        return m, 0, 0
-    return m, seen_at(m.pose), seen_at(m.pose, math.inf)
+        return _Matched(m, stale=stale)
+    return _Matched(m, seen=seen_at(m.pose), seen_former=seen_at(m.pose, former=True), stale=stale)

@@ -1,12 +1,14 @@
-"""What the sighting range cap changed in whole launches: matches scored by ground truth.
+"""What a sighting rule changed in whole launches: matches scored by ground truth.
 
 The coordinator logs every match of a waiting robot's map with the places the robots
-saw each other where it puts them: within ``polyswarm.sighting.MAX_SEEN_M``, and, when
-that differs, at any range ("seen 2 time(s) (4 counting sightings beyond 15 m)").
-This reads run folders of ``polyswarm bench explore --unknown-start`` (their
-``config.toml`` holds the true starts; nobody told the robots) and scores each proposed
-pose against the truth: right within 1 m and 5 degrees, else wrong. It counts the
-matches where the cap took a pose below ``MIN_SEEN`` places, right and wrong.
+saw each other where it puts them, by the rule it decides with and, when that differs,
+by another rule: "seen 2 time(s) (4 by the former rule: within 15 m, no arc)" (the
+sector's arc test, ``polyswarm.sighting.ARC_CLEAR_M``, against the 15 m cap before
+it); logs of the 15 m cap's code say "(4 counting sightings beyond 15 m)" (the cap
+against none). This reads run folders of ``polyswarm bench explore --unknown-start``
+(their ``config.toml`` holds the true starts; nobody told the robots) and scores each
+proposed pose against the truth: right within 1 m and 5 degrees, else wrong. It counts
+the matches seen in ``MIN_SEEN`` places by either rule, right and wrong.
 
     .venv/bin/python examples/launch_sightings.py /tmp/us2/*unknown* --out result.json
 """
@@ -30,7 +32,8 @@ from polyswarm.se2 import compose, inverse
 RIGHT_M, RIGHT_RAD = 1.0, math.radians(5.0)  # bench merge's WRONG_M, WRONG_RAD
 _MATCH = re.compile(
     r"map of (r\d+) against the merged map \(match (\d+)\): pose \(([-\d.]+) m, ([-\d.]+) m, "
-    r"([-\d.]+) deg\).*?, seen (\d+) time\(s\)(?: \((\d+) counting sightings beyond)?"
+    r"([-\d.]+) deg\).*?, seen (\d+) time\(s\)"
+    r"(?: \((\d+) (counting sightings beyond \d+ m|by the former rule: [^)]*)\))?"
 )
 
 
@@ -66,7 +69,8 @@ def run_matches(folder: Path) -> list[dict]:
                     "match": k,
                     "right": e_m <= RIGHT_M and e_rad <= RIGHT_RAD,
                     "seen": seen,
-                    "seen_any_range": int(m.group(7)) if m.group(7) else seen,
+                    "seen_other_rule": int(m.group(7)) if m.group(7) else seen,
+                    "other_rule": m.group(8),
                 }
             )
     return rows
@@ -84,10 +88,16 @@ def main() -> None:
         summary[kind] = {
             "matches": len(sel),
             "seen_enough": sum(r["seen"] >= MIN_SEEN for r in sel),
-            "seen_enough_at_any_range": sum(r["seen_any_range"] >= MIN_SEEN for r in sel),
-            "cap_changed_count": sum(r["seen"] != r["seen_any_range"] for r in sel),
+            "seen_enough_by_the_other_rule": sum(r["seen_other_rule"] >= MIN_SEEN for r in sel),
+            "rules_differ": sum(r["seen"] != r["seen_other_rule"] for r in sel),
         }
-    out = {"runs": [f.name for f in args.runs], "places_needed": MIN_SEEN, **summary}
+    other = sorted({r["other_rule"] for r in rows if r["other_rule"]})
+    out = {
+        "runs": [f.name for f in args.runs],
+        "places_needed": MIN_SEEN,
+        "other_rule": other,
+        **summary,
+    }
     print(json.dumps(out, indent=1))
     if args.out:
         meta = machine_meta() | {"command": " ".join(["python", *sys.argv])}

@@ -1,16 +1,17 @@
-"""How far may a robot be and still count as sighted? Right and wrong frames, by range cap.
+"""When does a return count as a sighting of a robot? Right and wrong frames, by rule.
 
 A frame of a waiting robot is committed once the robots saw each other in
 ``MIN_SEEN`` places where it puts them (``polyswarm.sighting``). This re-records
 ``bench merge``'s explorations (``polyswarm.benchmarks.merge._snapshots``: the same
 worlds, seeds and robots, deterministic) and, at every moment and pose that
-``bench merge`` stored in a result file, counts the places again with sightings
-farther than each cap left out. Poses are scored by the result file's ground truth
-(``found.wrong``: more than 1 m or 5 degrees off).
+``bench merge`` stored in a result file, counts the places again by each rule of
+``RULES``: a range cap, and the sector's centre or its whole arc clear of walls. Poses
+are scored by the result file's ground truth (``found.wrong``: more than 1 m or 5
+degrees off).
 
     .venv/bin/python examples/sighting_range.py docs/results/merge-seen.json \\
         office:0 rooms:0 loop:1 loop:3 cross:0 cross:2 maze:1 maze:3 \\
-        --out docs/results/merge-sight-range.json
+        --out docs/results/merge-sight-arc.json
 """
 
 from __future__ import annotations
@@ -29,7 +30,17 @@ from polyswarm.benchmarks.results import machine_meta
 from polyswarm.config import Config, with_profile
 from polyswarm.mapmatch import MIN_SEEN
 
-CAPS_M = (math.inf, 20.0, 15.0, 10.0, 8.0, 6.0)  # range caps tried, metres
+# the sighting rules tried (``polyswarm.sighting.seen_where``): a range cap in metres, and
+# whether the sector's whole arc must lie clear of walls or only its centre
+RULES = {
+    "centre, any range": {"max_range_m": math.inf, "arc": False},
+    "centre, within 20 m": {"max_range_m": 20.0, "arc": False},
+    "centre, within 15 m (the former rule)": {"max_range_m": 15.0, "arc": False},
+    "centre, within 10 m": {"max_range_m": 10.0, "arc": False},
+    "arc, any range (the rule now)": {"max_range_m": math.inf, "arc": True},
+    "arc, within 15 m": {"max_range_m": 15.0, "arc": True},
+}
+REPRODUCED = "centre, any range"  # the rule bench merge stored its counts with
 
 
 def _rows(result: dict, world: str, seed: int):
@@ -51,7 +62,7 @@ def main() -> None:
         result = json.load(f)
     profile = result["profiles"][0]
     cfg = with_profile(Config(), profile)
-    counts = {str(c): {"right": [], "wrong": []} for c in CAPS_M}
+    counts = {name: {"right": [], "wrong": []} for name in RULES}
     reproduced = total = 0
     for spec in args.runs:
         world, seed = spec.rsplit(":", 1)
@@ -66,17 +77,17 @@ def main() -> None:
             mine, theirs = tracks[0].until(row["t_s"]), tracks[k].until(row["t_s"])
             pose = np.array(row["ours"]["pose"])
             kind = "wrong" if row["ours"]["found"]["wrong"] else "right"
-            for cap in CAPS_M:
-                seen = sighting.mutual_seen(mine, theirs, pose, (a, b), max_range_m=cap)
+            for name, rule in RULES.items():
+                seen = sighting.mutual_seen(mine, theirs, pose, (a, b), **rule)
                 n = sighting.distinct_places(seen)
-                counts[str(cap)][kind].append(n)
-                if cap == math.inf:
+                counts[name][kind].append(n)
+                if name == REPRODUCED:
                     total += 1
                     reproduced += n == row["ours"]["seen"]
         print(f"{spec}: recorded and counted in {time.perf_counter() - t0:.0f} s")
     need = MIN_SEEN
     table = {
-        cap: {
+        name: {
             "right_poses": len(c["right"]),
             "right_seen_enough": sum(n >= need for n in c["right"]),
             "wrong_poses": len(c["wrong"]),
@@ -84,7 +95,7 @@ def main() -> None:
             "wrong_seen_enough": sum(n >= need for n in c["wrong"]),
             "wrong_seen_max": max(c["wrong"], default=0),
         }
-        for cap, c in counts.items()
+        for name, c in counts.items()
     }
     out = {
         "source": args.result,
@@ -93,15 +104,15 @@ def main() -> None:
         "places_needed": need,
         "moments_reproduced": reproduced,
         "moments": total,
-        "by_cap_m": table,
+        "by_rule": table,
         "meta": machine_meta() | {"command": " ".join(["python", *sys.argv])},
     }
     with open(args.out, "w") as f:
         json.dump(out, f, indent=1)
-    print(f"uncapped counts equal the stored ones at {reproduced} of {total} moments")
-    for cap, s in table.items():
+    print(f"{REPRODUCED}: counts equal the stored ones at {reproduced} of {total} moments")
+    for name, s in table.items():
         print(
-            f"cap {cap} m: right poses seen in {need}+ places {s['right_seen_enough']} of "
+            f"{name}: right poses seen in {need}+ places {s['right_seen_enough']} of "
             f"{s['right_poses']}; wrong seen at all {s['wrong_seen_at_all']}, in {need}+ "
             f"places {s['wrong_seen_enough']} of {s['wrong_poses']}"
         )

@@ -523,6 +523,11 @@ class FrameEstimate:
         self.contradictions = 0
         self.revisions = 0
 
+    def forget_candidate(self) -> None:
+        """The candidate is contradicted (the robots would have seen each other there):
+        none until the next proposal."""
+        self.candidate = None
+
     def add(self, m: MapMatch, seen: int = 0) -> np.ndarray | None:
         """The committed frame after ``m``, at whose pose the robots saw each other in
         ``seen`` places."""

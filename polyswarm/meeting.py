@@ -39,7 +39,9 @@ FOV_MARGIN_RAD = math.radians(15.0)
 # before it to 2 BODY_M past it, along the line of sight, is checked at these points
 # (in BODY_M, 0.3 m apart: a wall end between two is at most 2 cm nearer than both). In
 # the rooms world 3 of 5 standpoints reached lay 0.39-0.56 m from a wall, where the other
-# robot's sightings of the waiting one could not count (seed 0, c471ed9)
+# robot's sightings of the waiting one could not count (seed 0, c471ed9). The sector's
+# arc (ARC_CLEAR_M) is met then too: at the 6 m a standpoint lies from the other robot at
+# most (``agents.meeting.MEET_MAX_M``) it reaches 0.15 m either side of the line of sight
 SIGHT_SPAN = (-1.0, 0.0, 1.0, 2.0)
 
 

@@ -72,16 +72,21 @@ ROOM_CLEAR_M = 0.1
 # place within 0.8 m of it by at most 1.1 m (NEAR_M + BODY_M), a sighting's reach; three
 # places 1.5 m apart cannot all lie within 0.8 m of one point (their circle: 0.87 m)
 SEEN_APART_M = 1.5
-# a robot farther than this is not sighted: a sector is 2.8 degrees wide, so at range d its
-# return is placed up to d x 0.024 m aside (0.37 m at 15 m, 0.73 m at 30 m, beyond
-# WALL_CLEAR_M: a wall's return then looks clear of the wall). A wrong frame of the cross
-# was committed on such sightings (launch at unknown starts, seed 0; replayed: at 30 m).
-# On bench merge's recorded pairs (8 runs, merge-sight-range.json) a 15 m cap kept all 14
-# right poses seen in 3 places and left every one of the 141 wrong poses unseen (3 seen
-# before, one in 3 places); 10 m lost one right pose, 8 m twelve. In 20 launches
-# (launch-sightings.json) it kept two wrong frames from being committed and delayed six
-# robots' right frames by 1-38 matches: along corridors long sightings are real too
-MAX_SEEN_M = 15.0
+# the return's place within its sector is unknown: a sector 2.8 degrees wide spans
+# d x 0.049 m at range d (0.49 m at 10 m, 1.46 m at 30 m). A sighting counts only if the
+# whole arc of the sector at the return's range lies explored and this far clear of the
+# viewer's walls: a wall's return has its wall on that arc. Its margin is the map's wall
+# error (bench slam: 3-8 cm) and a correction's drift since the scan (SIGHTING_SLACK_M).
+# A wrong frame of the cross was committed on a wall's return at 30 m, 0.73 m from the
+# sector's centre to its wall (launch at unknown starts, seed 0); a 15 m cap on range
+# kept it out and delayed six right frames in corridors by 1-38 matches
+# (launch-sightings.json); the arc keeps it out at any range.
+ARC_CLEAR_M = 0.25
+ARC_STEP_M = 0.1  # the arc is tested at points this far apart
+# a robot farther than this is not sighted (``seen_where``'s default: no cap; the arc
+# test above grows with range). The 15 m cap of before is kept for comparison
+MAX_SEEN_M = math.inf
+FORMER_CAP_M = 15.0  # the former rule: sector centres within 15 m, no arc
 ROOM_RES_M = 0.1  # the raster of where a robot can stand
 DISC_STEP_M = 0.2  # the disc around a prediction is tried at places this far apart
 
@@ -302,17 +307,21 @@ def seen_where(
     viewer: Track,
     other: Track,
     frame,
-    no_wall: Callable[[np.ndarray], np.ndarray],
+    no_wall: Callable[..., np.ndarray],
     max_range_m: float = MAX_SEEN_M,
+    arc: bool = True,
 ) -> np.ndarray:
     """``seen``'s moments as the places (n, 2) (metres, the viewer's frame) where the
     frame put the other robot.
 
-    ``no_wall``: (n, 2) points in the viewer's frame -> True where a point lies in the
-    viewer's explored space farther than ``WALL_CLEAR_M`` from its walls
-    (``no_wall_test``). A frame's prediction that meets an unexplained return again and
-    again is positive evidence; silence (no return, or a wall) is none. Predictions
-    farther than ``max_range_m`` are not looked at (``MAX_SEEN_M``)."""
+    ``no_wall``: (n, 2) points in the viewer's frame and a clearance (metres) -> True
+    where a point lies in the viewer's explored space farther than that from its walls
+    (``no_wall_test``). A return counts where the frame puts the other robot if the
+    sector's centre at the return's range, and the space a robot's width behind it, lie
+    ``WALL_CLEAR_M`` clear of walls and, with ``arc``, the sector's whole arc there
+    ``ARC_CLEAR_M`` clear. A frame's prediction that meets an unexplained
+    return again and again is positive evidence; silence (no return, or a wall) is none.
+    Predictions farther than ``max_range_m`` are not looked at."""
     pred = _predictions(viewer, other, frame)
     if pred is None:
         return np.zeros((0, 2))
@@ -337,23 +346,37 @@ def seen_where(
     hit = miss <= NEAR_M + BODY_M
     if not hit.any():
         return np.zeros((0, 2))
-    rng, heading = got[hit, 0], poses[hit, 2] + got[hit, 1]
-    ray = np.column_stack([np.cos(heading), np.sin(heading)])
-    q = poses[hit, :2] + rng[:, None] * ray
+    origin, rng, heading = poses[hit, :2], got[hit, 0], poses[hit, 2] + got[hit, 1]
     # the return and the space just behind it (a robot's width on) are both clear of the
     # viewer's walls: a wall's return has its wall, and what lies behind it unexplored
-    clear_of_walls = no_wall(np.vstack([q, q + 2 * BODY_M * ray]))
-    return p[hit][clear_of_walls[: len(q)] & clear_of_walls[len(q) :]]
+    ok = _clear_behind(no_wall, origin, rng, heading, WALL_CLEAR_M)
+    if arc:  # the sector's arc at the return's range: no wall on it
+        for i in np.flatnonzero(ok):
+            n = max(2, math.ceil(rng[i] * step / ARC_STEP_M) + 1)
+            sweep = heading[i] + np.linspace(-step / 2, step / 2, n)
+            on_arc = origin[i] + rng[i] * np.column_stack([np.cos(sweep), np.sin(sweep)])
+            ok[i] = no_wall(on_arc, ARC_CLEAR_M).all()
+    return p[hit][ok]
+
+
+def _clear_behind(no_wall, origin, rng, heading, clear_m: float) -> np.ndarray:
+    """Per ray (origin (n, 2), range (n,), heading (n,)): its point at the range and the
+    point a robot's width (``2 * BODY_M``) behind lie ``clear_m`` clear of walls."""
+    ray = np.column_stack([np.cos(heading), np.sin(heading)])
+    q = origin + rng[:, None] * ray
+    ok = no_wall(np.vstack([q, q + 2 * BODY_M * ray]), clear_m)
+    return ok[: len(q)] & ok[len(q) :]
 
 
 def no_wall_test(pmap, clear_m: float = WALL_CLEAR_M) -> Callable[[np.ndarray], np.ndarray]:
-    """``seen``'s map test on ``pmap`` (a GridPolyMap): explored and clear of walls."""
+    """``seen``'s map test on ``pmap`` (a GridPolyMap): explored and clear of walls
+    (by ``clear_m`` metres, or the clearance the test is called with)."""
 
-    def no_wall(xy: np.ndarray) -> np.ndarray:
+    def no_wall(xy: np.ndarray, clear: float = clear_m) -> np.ndarray:
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         out = pmap.is_free_many(xy)
         for i in np.flatnonzero(out):
-            out[i] = pmap.nearest_obstacle_distance(xy[i, 0], xy[i, 1], clear_m) > clear_m
+            out[i] = pmap.nearest_obstacle_distance(xy[i, 0], xy[i, 1], clear) > clear
         return out
 
     return no_wall
@@ -368,13 +391,15 @@ def contradictions(a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = 
     return unseen(a, b, frame, ra) + unseen(b, a, inverse(frame), rb)
 
 
-def mutual_seen(a: Track, b: Track, frame, maps, max_range_m: float = MAX_SEEN_M) -> np.ndarray:
+def mutual_seen(
+    a: Track, b: Track, frame, maps, max_range_m: float = MAX_SEEN_M, arc: bool = True
+) -> np.ndarray:
     """Where either robot saw the other where ``frame`` (B's frame in A's) puts it
-    (``seen`` both ways, up to ``max_range_m``): the seen robot's places (n, 2), metres,
-    in A's frame. ``maps``: A's and B's GridPolyMaps. Count them with ``distinct_places``."""
+    (``seen_where`` both ways): the seen robot's places (n, 2), metres, in A's frame.
+    ``maps``: A's and B's GridPolyMaps. Count them with ``distinct_places``."""
     frame = np.asarray(frame, dtype=float)
-    b_seen = seen_where(a, b, frame, no_wall_test(maps[0]), max_range_m)  # B, in A's frame
-    a_seen = seen_where(b, a, inverse(frame), no_wall_test(maps[1]), max_range_m)  # A, in B's
+    b_seen = seen_where(a, b, frame, no_wall_test(maps[0]), max_range_m, arc)  # B, in A's
+    a_seen = seen_where(b, a, inverse(frame), no_wall_test(maps[1]), max_range_m, arc)
     return np.vstack([b_seen, transform_points(frame, a_seen)])
 
 

@@ -219,6 +219,58 @@ def test_a_frame_that_puts_the_robot_where_another_saw_nothing_is_never_committe
     frames.close()
 
 
+def test_a_candidate_frame_the_sightings_come_to_contradict_is_forgotten(caplog):
+    """The robots never saw each other: the agreeing matches' frame is a candidate and
+    draws r2 to meet r1. Then r1's lidar sees 10 m clear all around while r2 stands
+    where that frame puts it 5 m off: the next match forgets the candidate, and r2 is
+    no longer drawn there (it was drawn for minutes when only a new proposal replaced
+    a candidate)."""
+    import time
+
+    from shapely.geometry import box
+
+    from agents.anchoring import Anchoring
+    from agents.coordinator import Coordinator
+    from polyswarm.sighting import CLEAR_UNIT_M, SECTORS
+    from protocols.messages import Pose
+    from tests.test_mapmatch import _seen
+
+    truth = np.array([4.0, -3.0, 2.1])
+    cfg = Config()
+    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
+    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    main.on_pose("r1", 0.0, Pose(0.0, 0.0, 0.0))
+    main.on_alive("r1", True)
+    main.flush()
+    frames = Anchoring(cfg, ["r2"])
+    solo = frames.owner("r2", main)
+    solo.on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
+    solo.on_pose("r2", 0.0, Pose(0.0, 0.0, 0.0))
+    solo.on_alive("r2", True)
+    w = frames.waiting["r2"]
+    caplog.set_level("INFO", logger="agents.anchoring")
+
+    def run(t0: float, clear: bytes, until) -> float:
+        now, give_up = t0, time.monotonic() + 120.0
+        while not until() and time.monotonic() < give_up:
+            frames.sighted("r1", now, Pose(0.0, 0.0, 0.0, clear=clear))
+            frames.sighted("r2", now, Pose(0.0, 0.0, 0.0))
+            frames.tick(main, now)
+            now += 0.5
+            time.sleep(0.02)
+        return now
+
+    now = run(0.0, b"", lambda: w.frames.candidate is not None)  # no profiles: silence
+    assert w.frames.candidate is not None and "r2" in solo.rendezvous
+    clear_10m = bytes([int(10 / CLEAR_UNIT_M)] * SECTORS)
+    run(now, clear_10m, lambda: w.frames.candidate is None)
+    assert w.frames.candidate is None and w.frames.pose is None
+    assert "candidate frame of r2 contradicted by the sightings: forgotten" in caplog.text
+    frames.tick(main, now)
+    assert solo.rendezvous == {}
+    frames.close()
+
+
 def _handed_over(frame_sent):
     """r1 mapped the west of the building (the shared frame); r2, whose start ``truth``
     puts at (4 m, -3 m), the east in its own frame. r2 is anchored at ``frame_sent``

@@ -13,7 +13,6 @@ from polyswarm.polymap import GridPolyMap
 from polyswarm.se2 import compose, inverse, transform_points
 from polyswarm.sighting import (
     CLEAR_UNIT_M,
-    MAX_SEEN_M,
     MIN_CONTRADICTIONS,
     SECTORS,
     WALL_CLEAR_M,
@@ -26,6 +25,7 @@ from polyswarm.sighting import (
     mutual_seen,
     no_wall_test,
     seen,
+    seen_where,
     unseen,
 )
 from tests.test_mapmatch import CELL_M, _typed
@@ -152,20 +152,36 @@ def test_sightings_count_in_places_not_moments():
     assert distinct_places(mutual_seen(a, moving, identity, (hall, hall))) == 3
 
 
-def test_a_return_farther_than_the_sighting_range_is_no_sighting():
-    """At 30 m a 2.8-degree sector places its return 0.7 m aside, beyond what tells a
-    robot from a wall: a return where a frame puts the other robot counts as a sighting
-    within ``MAX_SEEN_M`` only."""
+def _seen_once(hall, at_xy, return_xy, **rule) -> int:
+    """A viewer at the origin whose scan has a return at ``return_xy``; the frame puts
+    the other robot at ``at_xy``: sightings counted by ``seen_where`` with ``rule``."""
+    identity = (0.0, 0.0, 0.0)
+    viewer, other = Track(), Track()
+    viewer.add(Sighting(0.5, identity, profile_with_a_robot_at(return_xy, clear_m=45.0)))
+    other.add(Sighting(0.0, (*at_xy, 0.0)))
+    other.add(Sighting(1.0, (*at_xy, 0.0)))
+    return len(seen_where(viewer, other, identity, no_wall_test(hall), **rule))
+
+
+def test_a_wall_return_far_away_is_no_sighting_a_robot_clear_of_walls_is():
+    """A 2.8-degree sector places its return anywhere across d x 0.049 m: 1.46 m at 30 m.
+    A wall's return at 30 m, its sector's centre 0.6-0.73 m from the wall, passed the
+    former test of the centre alone (a wrong frame was committed so); the sector's arc
+    reaches the wall. A robot in the middle of the hall at 12 and 25 m is still seen."""
     hall_box = box(-1, -3, 40, 3)
     hall = GridPolyMap.from_polygons(_typed(hall_box, hall_box.boundary), CELL_M)
-    identity = (0.0, 0.0, 0.0)
-    for x_m, expected in ((MAX_SEEN_M - 3.0, 1), (MAX_SEEN_M + 3.0, 0), (30.0, 0)):
-        viewer, other = Track(), Track()
-        profile = profile_with_a_robot_at((x_m, 0.0), clear_m=45.0)
-        viewer.add(Sighting(0.5, identity, profile))
-        other.add(Sighting(0.0, (x_m, 0.0, 0.0)))
-        other.add(Sighting(1.0, (x_m, 0.0, 0.0)))
-        assert seen(viewer, other, identity, no_wall_test(hall)) == expected, x_m
+    former = {"max_range_m": math.inf, "arc": False}
+    fooled = 0
+    for x_m in np.arange(28.0, 32.0, 0.05):  # returns on the wall y = 3 m, far away
+        on_wall = (float(x_m), 3.0 - 0.02)
+        near = (float(x_m), 2.4)  # where a wrong frame puts the robot: 0.6 m off the wall
+        if _seen_once(hall, near, on_wall, **former):
+            fooled += 1
+            assert _seen_once(hall, near, on_wall) == 0, x_m
+    assert fooled >= 5  # the former rule took some of those returns for a robot
+    for x_m in (12.0, 25.0):
+        assert _seen_once(hall, (x_m, 0.0), (x_m, 0.0)) == 1, x_m
+        assert _seen_once(hall, (x_m, 0.0), (x_m, 0.0), max_range_m=x_m - 1.0) == 0
 
 
 def _scan(pose, others) -> np.ndarray:
