@@ -251,6 +251,9 @@ class Coordinator:
         # rad) in this coordinator's frame. A robot exploring alone is drawn to where its
         # candidate frame puts the nearest robot of the swarm (and the way that one faces)
         self.rendezvous: dict[str, tuple[float, ...]] = {}
+        # ... and those of them whose candidate frame the robots were seen at: they tour
+        # standpoints before their own frontiers (which the swarm has likely explored)
+        self.tour_first: set[str] = set()
         self.meetings = Meetings(cfg)  # their tours once no frontier is left
 
     # -- inputs -------------------------------------------------------------------------------
@@ -782,7 +785,7 @@ class Coordinator:
             if self.state == MissionState.EXPLORING:
                 # nothing any robot may take now (none left, or those left failed lately):
                 # a robot drawn to a rendezvous tours standpoints in sight of it
-                idle = not np.isfinite(costs).any()
+                idle = not np.isfinite(costs).any() or bool(self.tour_first & set(self.rendezvous))
                 if idle and self.rendezvous and self.meetings.orders(self, live, reach):
                     self._no_target_since, self._no_target_cycles = None, 0
                 elif not reachable.any():

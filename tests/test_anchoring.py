@@ -171,6 +171,7 @@ def test_a_frame_the_robots_never_saw_each_other_at_is_sought_not_committed():
     assert not tick_until(lambda now: w.matches >= 6)  # 30 s of agreeing matches
     assert w.matches >= 6 and len(w.frames.run) >= 2  # they ran, and agreed
     assert w.frames.pose is None and w.frames.candidate is not None
+    assert solo.tour_first == set()  # never seen there: it explores its own frontiers
     r1_in_r2s_frame = transform_points(inverse(truth), np.zeros((1, 2)))[0]
     assert np.hypot(*(np.array(solo.rendezvous["r2"][:2]) - r1_in_r2s_frame)) < 0.1
     assert main.rendezvous == {}  # the swarm's robots go on exploring
@@ -268,6 +269,46 @@ def test_a_candidate_frame_the_sightings_come_to_contradict_is_forgotten(caplog)
     assert "candidate frame of r2 contradicted by the sightings: forgotten" in caplog.text
     frames.tick(main, now)
     assert solo.rendezvous == {}
+    frames.close()
+
+
+def test_a_robot_seen_where_the_candidate_frame_puts_it_tours_before_exploring():
+    """r1's lidar has a return where the maps' frame puts r2 (5 m off): seen in one
+    place, too few to commit; r2's solo coordinator sends it to tour standpoints in sight
+    of r1 before its own frontiers (``tour_first``)."""
+    import time
+
+    from shapely.geometry import box
+
+    from agents.anchoring import Anchoring
+    from agents.coordinator import Coordinator
+    from protocols.messages import Pose
+    from tests.test_mapmatch import _seen
+    from tests.test_sighting import profile_with_a_robot_at
+
+    truth = np.array([4.0, -3.0, 2.1])
+    cfg = Config()
+    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
+    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    main.on_pose("r1", 0.0, Pose(0.0, 0.0, 0.0))
+    main.on_alive("r1", True)
+    main.flush()
+    frames = Anchoring(cfg, ["r2"])
+    solo = frames.owner("r2", main)
+    solo.on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
+    solo.on_pose("r2", 0.0, Pose(0.0, 0.0, 0.0))
+    solo.on_alive("r2", True)
+    w = frames.waiting["r2"]
+    r2_seen = profile_with_a_robot_at(tuple(truth[:2]), clear_m=10.0)
+    now, give_up = 0.0, time.monotonic() + 120.0
+    while not solo.tour_first and time.monotonic() < give_up:
+        frames.sighted("r1", now, Pose(0.0, 0.0, 0.0, clear=r2_seen))
+        frames.sighted("r2", now, Pose(0.0, 0.0, 0.0))
+        frames.tick(main, now)
+        now += 0.5
+        time.sleep(0.02)
+    assert solo.tour_first == {"r2"} and "r2" in solo.rendezvous
+    assert w.seen_at_candidate == 1 and w.frames.pose is None  # one place: not committed
     frames.close()
 
 

@@ -168,3 +168,26 @@ def test_a_solo_robot_whose_frontiers_failed_lately_tours_meanwhile():
     coord.cycle()
     a = coord.robots["r2"].assignment
     assert a is not None and a.frontier == (OTHER,)
+
+
+def test_a_solo_robot_seen_at_its_candidate_frame_tours_before_its_frontiers():
+    """Its frontier is open, but the robots were seen where the candidate frame puts
+    them (``tour_first``): it is sent to a standpoint in sight of the rendezvous; once
+    that no longer holds, back to its frontier."""
+    types = [VectorType.OBSTACLE] * len(L_FLAT)
+    types[2] = VectorType.FRONTIER  # the upper arm's right side is open
+    coord = _solo(_flat(types), (3.0, 2.0, 0.0))
+    coord.now = 2.0
+    coord.cycle()
+    frontier = coord.robots["r2"].assignment
+    assert frontier is not None and frontier.frontier != ()  # a frontier target first
+    coord.rendezvous, coord.tour_first = {"r2": OTHER}, {"r2"}
+    coord.now = 3.0
+    coord.cycle()
+    a = coord.robots["r2"].assignment
+    assert a is not None and a.frontier == (OTHER,) and a.target != frontier.target
+    assert MEET_NEAR_M - 1e-9 <= math.dist(a.goal, OTHER) <= 6.0 + 1e-9
+    coord.tour_first = set()
+    coord.now = 4.0
+    coord.cycle()
+    assert coord.robots["r2"].assignment.frontier != (OTHER,)  # its frontier again
