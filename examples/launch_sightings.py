@@ -36,6 +36,8 @@ _MATCH = re.compile(
     r"(?: \((\d+) (counting sightings beyond \d+ m|by the former rule: [^)]*)\))?"
 )
 
+_UNDONE = re.compile(r"robot (r\d+): \d+ moments since its merge contradict .*?merge undone")
+
 
 def _log_records(path: Path) -> list[str]:
     """The log's records, rich's wrapped continuation lines joined back on (runs of
@@ -50,13 +52,19 @@ def _log_records(path: Path) -> list[str]:
 
 
 def run_matches(folder: Path) -> list[dict]:
-    """Every logged match of a run with its sightings and its truth."""
+    """Every logged match of a run with its sightings and its truth. Matches of a robot
+    whose merge was undone are left out from then on: it speaks in the frame it was
+    anchored in, not its start's, so its start says nothing of them."""
     cfg = tomllib.loads((folder / "config.toml").read_text())
     starts = np.array(cfg["sim"]["start_poses"], dtype=float)
     rows = []
+    undone: set[str] = set()
     for record in _log_records(folder / "logs" / "coordinator.log"):
+        undone |= set(_UNDONE.findall(record))
         for m in _MATCH.finditer(record):
             rid, k = m.group(1), int(m.group(2))
+            if rid in undone:
+                continue
             pose = np.array([float(m.group(3)), float(m.group(4)), math.radians(float(m.group(5)))])
             i = int(rid[1:]) - 1
             truth = compose(inverse(starts[0]), starts[i])
