@@ -783,8 +783,9 @@ class Coordinator:
                 log.info("new frontiers while returning: exploring again")
                 self.state = MissionState.EXPLORING
             if self.state == MissionState.EXPLORING:
-                # nothing any robot may take now (none left, or those left failed lately):
-                # a robot drawn to a rendezvous tours standpoints in sight of it
+                # nothing any robot may take now (none left, or those left failed lately),
+                # or a robot seen at its candidate frame (``tour_first``): a robot drawn to
+                # a rendezvous tours standpoints in sight of it
                 idle = not np.isfinite(costs).any() or bool(self.tour_first & set(self.rendezvous))
                 if idle and self.rendezvous and self.meetings.orders(self, live, reach):
                     self._no_target_since, self._no_target_cycles = None, 0
