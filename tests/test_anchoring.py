@@ -129,15 +129,13 @@ def _see_each_other(frames, truth, moments: int = 7) -> None:
         frames.sighted("r2", float(k), Pose(*mine, 0.0))
 
 
-def test_a_frame_the_robots_never_saw_each_other_at_is_sought_not_committed():
-    """The maps agree (the same maps as above), but the robots never saw each other:
-    nothing is committed, however long the matches agree; the waiting robot is drawn to
-    where the frame they propose puts the other robot, in its own frame."""
-    import time
-
+def _r2_waiting():
+    """r1 mapped the west of the building (the shared frame); r2, whose start ``truth``
+    puts at (4 m, -3 m), the east in its own frame, and waits for its frame: (truth, main
+    coordinator, anchoring, r2's solo coordinator), both robots alive at their starts."""
     from shapely.geometry import box
 
-    from agents.anchoring import MATCH_PERIOD_S, Anchoring
+    from agents.anchoring import Anchoring
     from agents.coordinator import Coordinator
     from protocols.messages import Pose
     from tests.test_mapmatch import _seen
@@ -154,6 +152,36 @@ def test_a_frame_the_robots_never_saw_each_other_at_is_sought_not_committed():
     solo.on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
     solo.on_pose("r2", 0.0, Pose(0.0, 0.0, 0.0))
     solo.on_alive("r2", True)
+    return truth, main, frames, solo
+
+
+def _sighted_ticks(frames, main, t0: float, r1_clear: bytes, until) -> float:
+    """Both robots at their starts, r1's scans with the clear profile ``r1_clear``: a pose
+    each and ``frames.tick`` every half simulated second until ``until()``; now."""
+    import time
+
+    from protocols.messages import Pose
+
+    now, give_up = t0, time.monotonic() + 120.0
+    while not until() and time.monotonic() < give_up:
+        frames.sighted("r1", now, Pose(0.0, 0.0, 0.0, clear=r1_clear))
+        frames.sighted("r2", now, Pose(0.0, 0.0, 0.0))
+        frames.tick(main, now)
+        now += 0.5
+        time.sleep(0.02)
+    return now
+
+
+def test_a_frame_the_robots_never_saw_each_other_at_is_sought_not_committed():
+    """The maps agree (the same maps as above), but the robots never saw each other:
+    nothing is committed, however long the matches agree; the waiting robot is drawn to
+    where the frame they propose puts the other robot, in its own frame."""
+    import time
+
+    from agents.anchoring import MATCH_PERIOD_S
+    from protocols.messages import Pose
+
+    truth, main, frames, solo = _r2_waiting()
     for k in range(6):  # in each other's view, but r1's scans say nothing (no profile)
         frames.sighted("r1", float(k), Pose(0.0, 0.0, 0.0))
         frames.sighted("r2", float(k), Pose(0.0, 0.0, 0.0))
@@ -226,40 +254,15 @@ def test_a_candidate_frame_the_sightings_come_to_contradict_is_forgotten(caplog)
     where that frame puts it 5 m off: the next match forgets the candidate, and r2 is
     no longer drawn there (it was drawn for minutes when only a new proposal replaced
     a candidate)."""
-    import time
 
-    from shapely.geometry import box
-
-    from agents.anchoring import Anchoring
-    from agents.coordinator import Coordinator
     from polyswarm.sighting import CLEAR_UNIT_M, SECTORS
-    from protocols.messages import Pose
-    from tests.test_mapmatch import _seen
 
-    truth = np.array([4.0, -3.0, 2.1])
-    cfg = Config()
-    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
-    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
-    main.on_pose("r1", 0.0, Pose(0.0, 0.0, 0.0))
-    main.on_alive("r1", True)
-    main.flush()
-    frames = Anchoring(cfg, ["r2"])
-    solo = frames.owner("r2", main)
-    solo.on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
-    solo.on_pose("r2", 0.0, Pose(0.0, 0.0, 0.0))
-    solo.on_alive("r2", True)
+    _, main, frames, solo = _r2_waiting()
     w = frames.waiting["r2"]
     caplog.set_level("INFO", logger="agents.anchoring")
 
     def run(t0: float, clear: bytes, until) -> float:
-        now, give_up = t0, time.monotonic() + 120.0
-        while not until() and time.monotonic() < give_up:
-            frames.sighted("r1", now, Pose(0.0, 0.0, 0.0, clear=clear))
-            frames.sighted("r2", now, Pose(0.0, 0.0, 0.0))
-            frames.tick(main, now)
-            now += 0.5
-            time.sleep(0.02)
-        return now
+        return _sighted_ticks(frames, main, t0, clear, until)
 
     now = run(0.0, b"", lambda: w.frames.candidate is not None)  # no profiles: silence
     assert w.frames.candidate is not None and "r2" in solo.rendezvous
@@ -276,37 +279,13 @@ def test_a_robot_seen_where_the_candidate_frame_puts_it_tours_before_exploring()
     """r1's lidar has a return where the maps' frame puts r2 (5 m off): seen in one
     place, too few to commit; r2's solo coordinator sends it to tour standpoints in sight
     of r1 before its own frontiers (``tour_first``)."""
-    import time
 
-    from shapely.geometry import box
-
-    from agents.anchoring import Anchoring
-    from agents.coordinator import Coordinator
-    from protocols.messages import Pose
-    from tests.test_mapmatch import _seen
     from tests.test_sighting import profile_with_a_robot_at
 
-    truth = np.array([4.0, -3.0, 2.1])
-    cfg = Config()
-    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
-    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
-    main.on_pose("r1", 0.0, Pose(0.0, 0.0, 0.0))
-    main.on_alive("r1", True)
-    main.flush()
-    frames = Anchoring(cfg, ["r2"])
-    solo = frames.owner("r2", main)
-    solo.on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
-    solo.on_pose("r2", 0.0, Pose(0.0, 0.0, 0.0))
-    solo.on_alive("r2", True)
+    truth, main, frames, solo = _r2_waiting()
     w = frames.waiting["r2"]
     r2_seen = profile_with_a_robot_at(tuple(truth[:2]), clear_m=10.0)
-    now, give_up = 0.0, time.monotonic() + 120.0
-    while not solo.tour_first and time.monotonic() < give_up:
-        frames.sighted("r1", now, Pose(0.0, 0.0, 0.0, clear=r2_seen))
-        frames.sighted("r2", now, Pose(0.0, 0.0, 0.0))
-        frames.tick(main, now)
-        now += 0.5
-        time.sleep(0.02)
+    _sighted_ticks(frames, main, 0.0, r2_seen, lambda: bool(solo.tour_first))
     assert solo.tour_first == {"r2"} and "r2" in solo.rendezvous
     assert w.seen_at_candidate == 1 and w.frames.pose is None  # one place: not committed
     frames.close()

@@ -149,9 +149,9 @@ def test_standpoints_lie_where_the_other_robots_lidar_looks():
     assert (np.abs(behind) > 150.0).any()
 
 
-def test_a_solo_robot_whose_frontiers_failed_lately_tours_meanwhile():
-    """Its one frontier failed (excluded for a while): it is not left standing, it is
-    sent to a standpoint; a rendezvous never takes a target it may take."""
+def _solo_with_a_frontier():
+    """A solo coordinator of r2 in the flat whose upper arm's right side is open, and
+    the frontier target it sent r2 first."""
     types = [VectorType.OBSTACLE] * len(L_FLAT)
     types[2] = VectorType.FRONTIER  # the upper arm's right side is open
     coord = _solo(_flat(types), (3.0, 2.0, 0.0))
@@ -159,6 +159,13 @@ def test_a_solo_robot_whose_frontiers_failed_lately_tours_meanwhile():
     coord.cycle()
     frontier = coord.robots["r2"].assignment
     assert frontier is not None and frontier.frontier != ()  # a frontier target first
+    return coord, frontier
+
+
+def test_a_solo_robot_whose_frontiers_failed_lately_tours_meanwhile():
+    """Its one frontier failed (excluded for a while): it is not left standing, it is
+    sent to a standpoint; a rendezvous never takes a target it may take."""
+    coord, frontier = _solo_with_a_frontier()
     coord.rendezvous = {"r2": OTHER}
     coord.cycle()
     assert coord.robots["r2"].assignment.target == frontier.target  # kept while it may
@@ -174,13 +181,7 @@ def test_a_solo_robot_seen_at_its_candidate_frame_tours_before_its_frontiers():
     """Its frontier is open, but the robots were seen where the candidate frame puts
     them (``tour_first``): it is sent to a standpoint in sight of the rendezvous; once
     that no longer holds, back to its frontier."""
-    types = [VectorType.OBSTACLE] * len(L_FLAT)
-    types[2] = VectorType.FRONTIER  # the upper arm's right side is open
-    coord = _solo(_flat(types), (3.0, 2.0, 0.0))
-    coord.now = 2.0
-    coord.cycle()
-    frontier = coord.robots["r2"].assignment
-    assert frontier is not None and frontier.frontier != ()  # a frontier target first
+    coord, frontier = _solo_with_a_frontier()
     coord.rendezvous, coord.tour_first = {"r2": OTHER}, {"r2"}
     coord.now = 3.0
     coord.cycle()
