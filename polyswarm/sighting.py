@@ -85,10 +85,8 @@ SEEN_APART_M = 1.5
 # wrong poses seen at all: 0 of 141 (the margin tried at 0.15-0.25 m: docs/merge-log.md)
 ARC_CLEAR_M = 0.25
 ARC_STEP_M = 0.1  # the arc is tested at points this far apart
-# a robot farther than this is not sighted (``seen_where``'s default: no cap; the arc
-# test above grows with range). The 15 m cap of before is kept for comparison
-MAX_SEEN_M = math.inf
-FORMER_CAP_M = 15.0  # the former rule: sector centres within 15 m, no arc
+# the former rule, logged beside for comparison: sector centres within 15 m, no arc
+FORMER_CAP_M = 15.0
 ROOM_RES_M = 0.1  # the raster of where a robot can stand
 DISC_STEP_M = 0.2  # the disc around a prediction is tried at places this far apart
 
@@ -310,7 +308,7 @@ def seen_where(
     other: Track,
     frame,
     no_wall: Callable[..., np.ndarray],
-    max_range_m: float = MAX_SEEN_M,
+    max_range_m: float = math.inf,
     arc: bool = True,
 ) -> np.ndarray:
     """``seen``'s moments as the places (n, 2) (metres, the viewer's frame) where the
@@ -323,7 +321,8 @@ def seen_where(
     ``WALL_CLEAR_M`` clear of walls and, with ``arc``, the sector's whole arc there
     ``ARC_CLEAR_M`` clear. A frame's prediction that meets an unexplained
     return again and again is positive evidence; silence (no return, or a wall) is none.
-    Predictions farther than ``max_range_m`` are not looked at."""
+    Predictions farther than ``max_range_m`` are not looked at (no cap by default: the
+    arc test grows with range)."""
     pred = _predictions(viewer, other, frame)
     if pred is None:
         return np.zeros((0, 2))
@@ -394,7 +393,7 @@ def contradictions(a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = 
 
 
 def mutual_seen(
-    a: Track, b: Track, frame, maps, max_range_m: float = MAX_SEEN_M, arc: bool = True
+    a: Track, b: Track, frame, maps, max_range_m: float = math.inf, arc: bool = True
 ) -> np.ndarray:
     """Where either robot saw the other where ``frame`` (B's frame in A's) puts it
     (``seen_where`` both ways): the seen robot's places (n, 2), metres, in A's frame.
