@@ -77,6 +77,7 @@ from polyswarm.sighting import (
     Room,
     Sighting,
     Track,
+    contradicted_where,
     contradictions,
     distinct_places,
     mutual_seen,
@@ -100,6 +101,7 @@ UNDO_CONTRADICTIONS = 2 * MIN_CONTRADICTIONS
 # docs/merge-log.md); a frame 2.2 m and 20 deg off, 62-69 % (office launch, seed 1)
 UNDO_CONFLICT_SHARE = 0.25
 UNDO_AUDITS = 2
+UNDO_EVIDENCE_LOGGED = 10  # contradicting moments logged with an undo
 WRONG_ANCHOR_ENV = "POLYSWARM_WRONG_ANCHOR"
 # places the robots were seen at a candidate frame before the waiting robot tours
 # standpoints ahead of its own frontiers: matches at wrong poses were seen anywhere 13
@@ -155,6 +157,9 @@ class _Audit:
     last_s: float = -math.inf
     running: Future | None = None
     contradicted: int = 0  # the latest audit's moments against the frame
+    # those moments: (other robot, time s, viewer 0 (the other) or 1 (this one), the
+    # viewer's x, y, where the frame put the one not seen x, y), metres, shared frame
+    evidence: list[tuple] = field(default_factory=list)
     conflicting: int = 0  # audits in a row whose maps conflicted
 
 
@@ -264,7 +269,8 @@ class Anchoring:
         for rid, a in list(self.audits.items()):
             if a.running is not None and a.running.done():
                 try:
-                    a.contradicted, share, overlap_m2 = a.running.result()
+                    a.evidence, share, overlap_m2 = a.running.result()
+                    a.contradicted = len(a.evidence)
                 except Exception:  # a failed audit must not stop the coordinator: retried
                     log.exception("auditing the frame of %s failed", rid)
                 else:
@@ -312,24 +318,24 @@ class Anchoring:
         mine = self.tracks.get(rid)
         if mine is not None:
             mine = mine.since(max(a.since_s, info.corrected_s))
-        theirs = [
-            self.tracks[o].since(max(a.since_s, other.corrected_s))
+        theirs = {
+            o: self.tracks[o].since(max(a.since_s, other.corrected_s))
             for o, other in main.robots.items()
             if o != rid and o in self.tracks
-        ]
+        }
         own = info.map
         seen = mine is not None and len(mine) > 0 and bool(theirs)
-        count = _contradiction_count(theirs, mine, (main.merged, own)) if seen else None
+        where = _contradicted_where(theirs, mine, (main.merged, own)) if seen else None
 
-        def audit() -> tuple[int, float, float]:
-            n = count(np.zeros(3)) if count is not None else 0
+        def audit() -> tuple[list[tuple], float, float]:
+            moments = where(np.zeros(3)) if where is not None else []
             fits = fit_at([m for _, m in earlier], own, np.zeros(3))
             roots = [ev for (root, _), ev in zip(earlier, fits, strict=True) if root]
             if sum(ev["overlap_m2"] for ev in roots) < MIN_OVERLAP_M2:
                 roots = fits
             conflicts = sum(ev["conflict_share"] * ev["walls_inside"] for ev in roots)
             inside = sum(ev["walls_inside"] for ev in roots)
-            return n, conflicts / max(inside, 1.0), sum(ev["overlap_m2"] for ev in roots)
+            return moments, conflicts / max(inside, 1.0), sum(ev["overlap_m2"] for ev in roots)
 
         return audit
 
@@ -344,6 +350,20 @@ class Anchoring:
             a.contradicted,
             a.conflicting,
         )
+        for o, t, viewer, vx, vy, px, py in a.evidence[:UNDO_EVIDENCE_LOGGED]:
+            who, whom = (o, rid) if viewer == 0 else (rid, o)
+            log.warning(
+                "  at %.1f s %s at (%.2f, %.2f) saw clear where the frame put %s: "
+                "(%.2f, %.2f), %.1f m away",
+                t,
+                who,
+                vx,
+                vy,
+                whom,
+                px,
+                py,
+                math.hypot(px - vx, py - vy),
+            )
         info = main.withdraw(rid)
         solo = self._solo(rid, info.start)  # its start, in the coordinates it speaks in
         mine = solo.robots[rid]
@@ -494,6 +514,24 @@ class Anchoring:
             main.on_robot_map(rid, solo.map, solo.atlas)
         log.info("robot %s joins the swarm's map (%d matches)", rid, w.matches)
         return True
+
+
+def _contradicted_where(theirs: dict[str, Track], mine: Track, maps):
+    """A function of a frame of ``mine``'s robot (in the frame of ``maps[0]``): the
+    moments the sightings contradict it, as ``_Audit.evidence``'s rows (``theirs``: the
+    other robots' tracks by robot). Rooms as in ``_contradiction_count``."""
+    rooms: list[Room] = []
+
+    def where(frame: np.ndarray) -> list[tuple]:
+        if not rooms:
+            rooms.extend([Room(maps[0]), Room(maps[1])])
+        return [
+            (o, *(float(v) for v in row[:1]), int(row[1]), *(float(v) for v in row[2:]))
+            for o, t in theirs.items()
+            for row in contradicted_where(t, mine, frame, (rooms[0], rooms[1]))
+        ]
+
+    return where
 
 
 def _contradiction_count(theirs: list[Track], mine: Track, maps):

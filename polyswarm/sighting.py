@@ -244,12 +244,19 @@ def unseen(viewer: Track, other: Track, frame, room: Room | None = None) -> int:
     within ``NEAR_M`` of the prediction hides it, and along a corridor that is every
     prediction. With ``room`` (the viewer's map, ``Room``) only the disc's places where a
     robot can stand count: each must lie within its sector's clear distance."""
+    return len(unseen_where(viewer, other, frame, room)[0])
+
+
+def unseen_where(viewer: Track, other: Track, frame, room: Room | None = None):
+    """``unseen``'s moments, as evidence for a log: (times (n,) seconds, the viewer's
+    poses (n, 3), where the frame put the other robot (n, 2), metres, viewer's frame)."""
     pred = _predictions(viewer, other, frame)
     if pred is None:
-        return 0
-    poses, clear, p, d, bearing = pred
+        return np.zeros(0), np.zeros((0, 3)), np.zeros((0, 2))
+    t, poses, clear, p, d, bearing = pred
     if room is not None:
-        return _unseen_in_room(poses, clear, p, room)
+        hit = _unseen_in_room(poses, clear, p, room)
+        return t[hit], poses[hit], p[hit]
     rows = np.arange(len(d))
     half = np.arcsin(NEAR_M / d)  # the disc's half-angle as the viewer sees it
     step = 2 * math.pi / SECTORS
@@ -261,12 +268,13 @@ def unseen(viewer: Track, other: Track, frame, room: Room | None = None) -> int:
             got = clear[rows, _sector(a)]
             nearest = np.where(k * step < half, np.minimum(nearest, got), nearest)
     nearest = np.minimum(nearest, clear[rows, _sector(bearing)])
-    return int(np.sum(nearest > d + NEAR_M))
+    hit = nearest > d + NEAR_M
+    return t[hit], poses[hit], p[hit]
 
 
 def _predictions(viewer: Track, other: Track, frame):
     """The viewer's moments where ``frame`` places the other robot far enough away for a
-    bearing to mean something: (viewer poses (n, 3), clear distances (n, SECTORS),
+    bearing to mean something: (times (n,), viewer poses (n, 3), clear distances (n, SECTORS),
     predicted positions (n, 2), their distances (n,) and bearings in the viewer's frame
     (n,)); None if there is none."""
     t, poses, clear = viewer.views()
@@ -279,11 +287,12 @@ def _predictions(viewer: Track, other: Track, frame):
     if not ok.any():
         return None
     bearing = np.arctan2(rel[ok, 1], rel[ok, 0]) - poses[ok, 2]
-    return poses[ok], clear[ok], p[ok], d[ok], bearing
+    return t[ok], poses[ok], clear[ok], p[ok], d[ok], bearing
 
 
-def _unseen_in_room(poses: np.ndarray, clear: np.ndarray, p: np.ndarray, room: Room) -> int:
-    """``unseen`` with the disc cut to where a robot can stand (see there)."""
+def _unseen_in_room(poses: np.ndarray, clear: np.ndarray, p: np.ndarray, room: Room) -> np.ndarray:
+    """``unseen`` with the disc cut to where a robot can stand (see there): per
+    prediction, contradicted or not."""
     n, m = len(p), len(_DISC)
     pts = (p[:, None, :] + _DISC[None, :, :]).reshape(-1, 2)
     can = room.allows(pts).reshape(n, m)
@@ -293,7 +302,7 @@ def _unseen_in_room(poses: np.ndarray, clear: np.ndarray, p: np.ndarray, room: R
     got = np.take_along_axis(clear, _sector(bearing), axis=1)
     would_see = (got > dist) & (dist > MIN_SIGHT_M / 2)
     # contradicted: somewhere to stand, and the scan would have seen the robot at each
-    return int(np.sum(can.any(axis=1) & (would_see | ~can).all(axis=1)))
+    return can.any(axis=1) & (would_see | ~can).all(axis=1)
 
 
 def seen(viewer: Track, other: Track, frame, no_wall: Callable[[np.ndarray], np.ndarray]) -> int:
@@ -326,7 +335,7 @@ def seen_where(
     pred = _predictions(viewer, other, frame)
     if pred is None:
         return np.zeros((0, 2))
-    poses, clear, p, d, bearing = pred
+    _, poses, clear, p, d, bearing = pred
     near = d <= max_range_m
     if not near.any():
         return np.zeros((0, 2))
@@ -387,9 +396,26 @@ def contradictions(a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = 
     """Moments where ``frame`` (B's frame in A's) puts either robot in the other's clear
     view: A's scans looking for B, and B's scans looking for A. ``rooms``: A's and B's
     maps as ``Room`` (see ``unseen``)."""
+    return len(contradicted_where(a, b, frame, rooms))
+
+
+def contradicted_where(
+    a: Track, b: Track, frame, rooms: tuple[Room, Room] | None = None
+) -> np.ndarray:
+    """``contradictions``' moments, as evidence for a log: rows of (time s, viewer 0 for
+    A or 1 for B, the viewer's x, y and where the frame put the other's x, y), metres in
+    A's frame."""
     frame = np.asarray(frame, dtype=float)
     ra, rb = rooms if rooms is not None else (None, None)
-    return unseen(a, b, frame, ra) + unseen(b, a, inverse(frame), rb)
+    rows = []
+    for viewer, (t, poses, p) in enumerate(
+        (unseen_where(a, b, frame, ra), unseen_where(b, a, inverse(frame), rb))
+    ):
+        at, there = poses[:, :2], p
+        if viewer == 1:  # B's frame to A's
+            at, there = transform_points(frame, at), transform_points(frame, there)
+        rows.append(np.column_stack([t, np.full(len(t), viewer), at, there]))
+    return np.vstack(rows)
 
 
 def mutual_seen(

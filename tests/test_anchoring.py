@@ -362,6 +362,11 @@ def test_a_merge_contradicted_later_is_undone_and_the_frame_found_again(sighting
     assert frames.undone == 1, "the audit did not undo the merge"
     if not sightings:  # one audit's conflicts are not trusted
         assert f"earlier ones in {UNDO_AUDITS} audits in a row: merge undone" in caplog.text
+    else:  # with its evidence: r1 at the origin looked where the frame put r2
+        x, y = wrong[:2]
+        assert f"r1 at (0.00, 0.00) saw clear where the frame put r2: ({x:.2f}, {y:.2f})" in (
+            caplog.text
+        )
     [(rid, release)] = sent
     assert rid == "r2" and release.own and release.frame == 2
     assert (release.x, release.y, release.theta) == (0.0, 0.0, 0.0)
@@ -413,7 +418,7 @@ def test_a_merge_the_sightings_agree_with_is_audited_and_kept():
 
     _ticks(frames, main, 2.0, three_audits, wall_s=60.0)
     assert len(runs) >= 3
-    assert all(r.result()[0] == 0 and r.result()[1] < 0.01 < r.result()[2] for r in runs)
+    assert all(r.result()[0] == [] and r.result()[1] < 0.01 < r.result()[2] for r in runs)
     assert frames.undone == 0 and "r2" in main.robots and "r2" not in frames.waiting
     frames.close()
 
@@ -442,7 +447,7 @@ def test_a_right_frame_is_held_against_maps_not_in_doubt_not_a_wrong_one_before_
         frames.audits[rid] = _Audit(1, since_s)
     n3, share3, overlap3 = frames._audit_evidence("r3", frames.audits["r3"], main)()
     n2, share2, overlap2 = frames._audit_evidence("r2", frames.audits["r2"], main)()
-    assert n2 == n3 == 0  # no sightings
+    assert n2 == n3 == []  # no sightings: no moments against either
     assert share3 < 0.01 and overlap3 > 10.0
     assert share2 > UNDO_CONFLICT_SHARE and overlap2 > 10.0
     frames.close()
