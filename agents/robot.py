@@ -401,6 +401,7 @@ class RobotAgent:
         not hold: the planner keeps clear of them (``agents.seen``)."""
         self._now_s = stamp_s
         pmap = self.merged if self.merged is not None else self.slam.map
+        self.seen.forget_seen_through(world, self.pose[:2])
         keep = ~self._near_peers(world, stamp_s)
         self.seen.add(stamp_s, world[keep], self.pose[:2], pmap)
 

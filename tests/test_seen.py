@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.seen import SEEN_KEEP_S, SEEN_RANGE_M, SeenObstacles
+from agents.seen import CLEAR_MARGIN_M, SEEN_KEEP_S, SEEN_RANGE_M, SeenObstacles
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon
 from tests.conftest import O
 
@@ -33,3 +33,34 @@ def test_only_close_returns_off_the_map_are_remembered_and_then_forgotten():
     assert len(seen) == 2
     assert [tuple(np.round(p, 3)) for p in seen.points(SEEN_KEEP_S + 1.0)] == [(2.001, 2.001)]
     assert len(seen.points(2 * SEEN_KEEP_S)) == 0
+
+
+def _ring_of_returns(centre, radius_m: float, beams: int = 360) -> np.ndarray:
+    a = np.linspace(-np.pi, np.pi, beams, endpoint=False)
+    return np.asarray(centre) + radius_m * np.column_stack([np.cos(a), np.sin(a)])
+
+
+def test_a_point_a_later_scan_sees_through_is_forgotten():
+    """A robot stood 1 m east of this one (a robot whose frame is unknown cannot be left
+    out): remembered. The next scan of a 1-degree lidar sees 1.9 m of free space east
+    (the wall x = 4.9 of a room of its own): forgotten. One that sees it at 1 m, or
+    sees nothing that way, keeps it; so does one whose returns that way are nearer."""
+    robot = np.array([3.0, 2.0])
+    body = np.array([[4.0, 2.0], [4.0, 2.12]])
+
+    def remembered(*scans) -> int:
+        seen = SeenObstacles()
+        seen.add(0.0, body, robot, room())
+        for scan in scans:
+            seen.forget_seen_through(scan, robot)
+        return len(seen)
+
+    assert remembered() == 2
+    assert remembered(_ring_of_returns(robot, 1.9)) == 0  # seen through
+    assert remembered(_ring_of_returns(robot, 1.0)) == 2  # still there
+    at_margin = _ring_of_returns(robot, 1.0 + CLEAR_MARGIN_M / 2)
+    assert remembered(at_margin) == 2  # within a return's noise of it
+    west = _ring_of_returns(robot, 1.9)
+    assert remembered(west[west[:, 0] < robot[0]]) == 2  # no return that way
+    occluded = np.vstack([_ring_of_returns(robot, 1.9), [[3.5, 2.0], [3.5, 2.06]]])
+    assert remembered(occluded) == 2  # something nearer hides it
