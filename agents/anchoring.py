@@ -215,6 +215,7 @@ class Anchoring:
         """Start the matches and audits that are due, take the finished ones; the anchors
         to send."""
         out = self._audit(main, now_s)
+        main.rendezvous = {}  # the swarm's robots drawn to waiting ones (``_rendezvous``)
         for rid, w in self.waiting.items():
             if w.matching is not None and w.matching.done():
                 self._took(rid, w, w.matching)
@@ -382,7 +383,12 @@ class Anchoring:
         """Send a waiting robot towards where its candidate frame puts the nearest
         robot of the swarm (in its own frame): if the frame is right they see each other
         there and the frame is committed; if not, the robot finds the place empty (or a
-        wall), the sightings contradict the frame and the next match leaves it out."""
+        wall), the sightings contradict the frame and the next match leaves it out.
+
+        Once the swarm has no frontier left, its robot nearest to where the frame puts
+        the waiting one tours standpoints in sight of it too: a robot standing still is
+        seen in one place however the other tours (rooms at unknown starts, seed 3: two
+        right frames seen in 1 and 2 places for 120 s, never merged)."""
         solo = w.solo
         me = solo.robots[rid].pose
         frame = w.frames.candidate
@@ -396,6 +402,9 @@ class Anchoring:
         k = int(np.argmin(np.hypot(*(there - me[:2]).T)))
         heading = compose(inverse(frame), others[k].pose)[2]  # its lidar looks this way
         solo.rendezvous[rid] = (float(there[k][0]), float(there[k][1]), float(heading))
+        if main.out_of_frontiers and others[k].id not in main.rendezvous:
+            x, y, th = (float(v) for v in compose(frame, me))  # the waiting one, shared frame
+            main.rendezvous[others[k].id] = (x, y, th)
 
     def _took(self, rid: str, w: _Waiting, done: Future) -> None:
         try:

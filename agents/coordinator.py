@@ -255,6 +255,7 @@ class Coordinator:
         # standpoints before their own frontiers (which the swarm has likely explored)
         self.tour_first: set[str] = set()
         self.meetings = Meetings(cfg)  # their tours once no frontier is left
+        self.out_of_frontiers = False  # the last cycle found no frontier a robot can reach
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -775,6 +776,7 @@ class Coordinator:
             costs = reach.costs([t.goal for t in targets.values()])
             # a target excluded for every robot (failed recently) waits; it is not gone
             reachable = np.isfinite(costs).any(axis=0)
+            self.out_of_frontiers = not reachable.any()
             for k, r in enumerate(live):  # targets this robot failed recently
                 for j, tid in enumerate(ids):
                     if r.excluded.get(tid, -math.inf) > self.now:

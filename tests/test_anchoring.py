@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import shapely
@@ -288,6 +290,30 @@ def test_a_robot_seen_where_the_candidate_frame_puts_it_tours_before_exploring()
     _sighted_ticks(frames, main, 0.0, r2_seen, lambda: bool(solo.tour_first))
     assert solo.tour_first == {"r2"} and "r2" in solo.rendezvous
     assert w.seen_at_candidate == 1 and w.frames.pose is None  # one place: not committed
+    frames.close()
+
+
+@pytest.mark.parametrize("out_of_frontiers", [True, False], ids=["swarm idle", "exploring"])
+def test_an_idle_swarm_robot_tours_in_sight_of_a_waiting_one(out_of_frontiers):
+    """Once the swarm has no frontier left, its robot nearest to where the candidate
+    frame puts the waiting robot is drawn to that place (and tours standpoints there,
+    ``Coordinator.rendezvous``): a robot standing still is seen in one place only. While
+    the swarm explores it is not."""
+    from tests.test_sighting import profile_with_a_robot_at
+
+    truth, main, frames, solo = _r2_waiting()
+    main.out_of_frontiers = out_of_frontiers
+    r2_seen = profile_with_a_robot_at(tuple(truth[:2]), clear_m=10.0)
+    _sighted_ticks(frames, main, 0.0, r2_seen, lambda: bool(solo.tour_first))
+    assert solo.tour_first == {"r2"}
+    if not out_of_frontiers:
+        assert main.rendezvous == {}
+    else:  # where r2 stands (its start, its pose (0, 0, 0) in its own frame)
+        x, y, th = main.rendezvous["r1"]
+        assert (
+            math.dist((x, y), truth[:2]) < 0.2
+            and abs(math.remainder(th - truth[2], math.tau)) < 0.05
+        )
     frames.close()
 
 
