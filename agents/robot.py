@@ -77,6 +77,7 @@ PEER_FRESH_S = 2.0
 # matched, a robot that had moved dragged its teammates' ICP down the corridor (zigzag,
 # first lane: jumps of 2.5 and 4.2 m along it)
 PEER_MASK_M = 0.6
+BLOB_MARGIN_M = 0.15  # a robot's blob of returns may be this much wider than the robot
 SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
 MOUNT_WAIT_SCANS = 20  # scans from a ROS robot without a mount in tf or config: say so
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
@@ -311,7 +312,7 @@ class RobotAgent:
         motion = deskew_motion(scan, self.odometry.at_many)
         # 2. PolySLAM: pose, and on keyframes the map delta (other robots are not walls)
         masked = self._without_peers(scan, stamp_s)
-        step = self.slam.process(masked, odom, motion)
+        step = self.slam.process(masked, odom, motion, self._blobs_m(stamp_s))
         turned = abs(math.remainder(step.pose[2] - self.pose[2], 2 * math.pi))
         if step.anchored:
             turned = 0.0  # the frame moved, not the robot
@@ -385,6 +386,16 @@ class RobotAgent:
             return scan
         self.stats.peer_returns_masked += int(hit.sum())
         return replace(scan, ranges=np.where(hit, np.nan, r))
+
+    def _blobs_m(self, now_s: float) -> float:
+        """How wide a blob of returns ICP leaves out (``PolySlam.process``): a robot's
+        width and a margin while a robot of the swarm may be near that this one cannot
+        place (its frame unknown here, or its poses not fresh); 0 otherwise (its returns
+        are masked as a peer's)."""
+        placed = {rid for rid, (t, _) in self.peers.items() if now_s - t <= PEER_FRESH_S}
+        if not self._own_frames - placed - {self.id}:
+            return 0.0
+        return 2 * self.cfg.nav.robot_radius_m + BLOB_MARGIN_M
 
     def _fresh_peers(self, now_s: float) -> list[np.ndarray]:
         return [xy for t, xy in self.peers.values() if now_s - t <= PEER_FRESH_S]

@@ -51,7 +51,7 @@ from polyswarm.polymap import (
 )
 from polyswarm.posegraph import PoseGraph
 from polyswarm.refine import refine_polygon
-from polyswarm.scan import LaserScan, scan_to_points
+from polyswarm.scan import LaserScan, isolated_blobs, scan_to_points
 from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
 from polyswarm.submap import KeyframeStore
 from polyswarm.trim import trim_keyframe
@@ -165,6 +165,7 @@ class PolySlam:
         self.keyframes = 0
         self.degenerate_keyframes = 0
         self.rejected_keyframes = 0
+        self.blob_returns_skipped = 0  # returns left out of ICP as blobs (``process``)
         self._keyframe_requested = False
         sub = cfg.submap
         self.store = KeyframeStore(sub.keyframes, sub.radius_m, sub.recent)
@@ -279,9 +280,15 @@ class PolySlam:
         """Make the next scan a keyframe (a robot that stopped to look at something)."""
         self._keyframe_requested = True
 
-    def process(self, scan: LaserScan, odom, motion: np.ndarray | None = None) -> SlamStep:
+    def process(
+        self, scan: LaserScan, odom, motion: np.ndarray | None = None, blobs_m: float = 0.0
+    ) -> SlamStep:
         """One scan with the odometry pose of the time its points are expressed at;
-        ``motion`` (``polyswarm.scan.deskew_motion``) de-skews a rolling sweep."""
+        ``motion`` (``polyswarm.scan.deskew_motion``) de-skews a rolling sweep.
+        ``blobs_m`` > 0: returns in isolated blobs no wider than that (metres;
+        ``polyswarm.scan.isolated_blobs``) are left out of ICP and loop closure, still
+        mapped: other robots the caller cannot place, which would pull the pose along
+        a corridor as they move."""
         odom = np.array(odom, dtype=float)
         if not np.isfinite(odom).all():
             raise PolyswarmError(f"odometry pose is not finite: {odom}")
@@ -322,7 +329,12 @@ class PolySlam:
             start_version = anchor_base
         res = None
         pose = pred
-        valid = points.xy[points.valid]
+        aligned = points.valid
+        if blobs_m > 0:
+            blobs = isolated_blobs(points, blobs_m)
+            self.blob_returns_skipped += int(blobs.sum())
+            aligned = aligned & ~blobs
+        valid = points.xy[aligned]
         if len(valid) and (self.store or self.map.cells):
             res = self._align(valid, pred, points.origin)
             pose = res.pose if res.inliers > 0 else pred
