@@ -72,13 +72,11 @@ from polyswarm.mapmatch import (
 )
 from polyswarm.se2 import compose, inverse, transform_points
 from polyswarm.sighting import (
-    FORMER_CAP_M,
     MIN_CONTRADICTIONS,
     Room,
     Sighting,
     Track,
     contradicted_where,
-    contradictions,
     distinct_places,
     mutual_seen,
 )
@@ -427,18 +425,12 @@ class Anchoring:
         w.frames.add(m, got.seen)
         if m.proposed:  # the candidate is this match's pose now
             w.seen_at_candidate = got.seen
-        far = (
-            f" ({got.seen_former} by the former rule: within {FORMER_CAP_M:.0f} m, no arc)"
-            if got.seen_former != got.seen
-            else ""
-        )
         log.info(
-            "map of %s against the merged map (match %d): %s, seen %d time(s)%s%s",
+            "map of %s against the merged map (match %d): %s, seen %d time(s)%s",
             rid,
             w.matches,
             m.summary(),
             got.seen,
-            far,
             "" if m.accepted else " (refused)",
         )
         if before is None and w.frames.pose is not None:
@@ -461,25 +453,23 @@ class Anchoring:
         sightings). A robot's poses from before its latest large correction are left out
         (they were sent from a frame that far off its map now)."""
         mine = self.tracks.get(rid)
-        theirs = [
-            self.tracks[o].since(info.corrected_s)
+        theirs = {
+            o: self.tracks[o].since(info.corrected_s)
             for o, info in main.robots.items()
             if o in self.tracks
-        ]
+        }
         if mine is None or not theirs:
             return None, None
         mine = mine.since(self.waiting[rid].solo.robots[rid].corrected_s)
         maps = (main.merged, self.waiting[rid].solo.robots[rid].map)
-        count = _contradiction_count(theirs, mine, maps)
+        where = _contradicted_where(theirs, mine, maps)
 
         def contradicts(frame: np.ndarray) -> bool:
-            return count(frame) >= MIN_CONTRADICTIONS
+            return len(where(frame)) >= MIN_CONTRADICTIONS
 
-        def seen_at(frame: np.ndarray, former: bool = False) -> int:
-            """Places in the shared frame, all robots' sightings (``former``: by the
-            rule before the arc test, for the log)."""
-            rule = {"max_range_m": FORMER_CAP_M, "arc": False} if former else {}
-            places = [mutual_seen(t, mine, frame, maps, **rule) for t in theirs]
+        def seen_at(frame: np.ndarray) -> int:
+            """Places in the shared frame, all robots' sightings."""
+            places = [mutual_seen(t, mine, frame, maps) for t in theirs.values()]
             return distinct_places(np.vstack(places))
 
         return contradicts, seen_at
@@ -527,35 +517,22 @@ class Anchoring:
 
 def _contradicted_where(theirs: dict[str, Track], mine: Track, maps):
     """A function of a frame of ``mine``'s robot (in the frame of ``maps[0]``): the
-    moments the sightings contradict it, as ``_Audit.evidence``'s rows (``theirs``: the
-    other robots' tracks by robot). Rooms as in ``_contradiction_count``."""
+    moments the sightings contradict it (``polyswarm.sighting.contradicted_where``, over
+    the other robots' tracks ``theirs``, by robot), as ``_Audit.evidence``'s rows; their
+    number is what a match counts. Where the robots can stand in each map (``Room``) is
+    built at the first call, in the thread that calls it."""
     rooms: list[Room] = []
 
     def where(frame: np.ndarray) -> list[tuple]:
         if not rooms:
             rooms.extend([Room(maps[0]), Room(maps[1])])
         return [
-            (o, *(float(v) for v in row[:1]), int(row[1]), *(float(v) for v in row[2:]))
+            (o, float(row[0]), int(row[1]), *(float(v) for v in row[2:]))
             for o, t in theirs.items()
             for row in contradicted_where(t, mine, frame, (rooms[0], rooms[1]))
         ]
 
     return where
-
-
-def _contradiction_count(theirs: list[Track], mine: Track, maps):
-    """A function of a frame of ``mine``'s robot (in the frame of ``maps[0]``): the
-    moments the sightings contradict it (``polyswarm.sighting.contradictions``, summed
-    over the other robots' tracks ``theirs``). Where the robots can stand in each map
-    (``Room``) is built at the first call, in the thread that calls it."""
-    rooms: list[Room] = []
-
-    def count(frame: np.ndarray) -> int:
-        if not rooms:
-            rooms.extend([Room(maps[0]), Room(maps[1])])
-        return sum(contradictions(t, mine, frame, (rooms[0], rooms[1])) for t in theirs)
-
-    return count
 
 
 @dataclass(frozen=True)
@@ -565,15 +542,13 @@ class _Matched:
     match: MapMatch | None  # None: no match (``why``)
     why: str = ""
     seen: int = 0  # places the robots saw each other at its pose
-    seen_former: int = 0  # the same by the former sighting rule (for the log)
     stale: bool = False  # the candidate frame it started with is contradicted now
 
 
 def _match(merged, own, contradicts, seen_at, candidate=None) -> _Matched:
     """``match_maps`` of a robot's map on the merged map (its images unchecked: two more
     searches, three times the time, to tell what the sightings tell), and the places the
-    robots saw each other at the pose it found (0 without sightings): by the arc test,
-    and by the former rule (``FORMER_CAP_M``, for the log only). ``candidate``: the
+    robots saw each other at the pose it found (0 without sightings). ``candidate``: the
     frame the robot is being sent to meet the others by, checked against the sightings."""
     stale = candidate is not None and contradicts is not None and contradicts(candidate)
     try:
@@ -582,4 +557,4 @@ def _match(merged, own, contradicts, seen_at, candidate=None) -> _Matched:
         return _Matched(None, str(e), stale=stale)
     if seen_at is None or not m.proposed:
         return _Matched(m, stale=stale)
-    return _Matched(m, seen=seen_at(m.pose), seen_former=seen_at(m.pose, former=True), stale=stale)
+    return _Matched(m, seen=seen_at(m.pose), stale=stale)

@@ -4,11 +4,13 @@ The coordinator logs every match of a waiting robot's map with the places the ro
 saw each other where it puts them, by the rule it decides with and, when that differs,
 by another rule: "seen 2 time(s) (4 by the former rule: within 15 m, no arc)" (the
 sector's arc test, ``polyswarm.sighting.ARC_CLEAR_M``, against the 15 m cap before
-it); logs of the 15 m cap's code say "(4 counting sightings beyond 15 m)" (the cap
-against none). This reads run folders of ``polyswarm bench explore --unknown-start``
-(their ``config.toml`` holds the true starts; nobody told the robots) and scores each
-proposed pose against the truth: right within 1 m and 5 degrees, else wrong. It counts
-the matches seen in ``MIN_SEEN`` places by either rule, right and wrong.
+it; code 82dfaac to 8814950); logs of the 15 m cap's code say "(4 counting sightings
+beyond 15 m)" (the cap against none). Logs of later code carry the arc rule alone: the
+other rule's counts then read as equal. This reads run folders of ``polyswarm bench
+explore --unknown-start`` (their ``config.toml`` holds the true starts; nobody told
+the robots) and scores each proposed pose against the truth: right within 1 m and 5
+degrees, else wrong. It counts the matches seen in ``MIN_SEEN`` places by either rule,
+right and wrong.
 
     .venv/bin/python examples/launch_sightings.py /tmp/us2/*unknown* --out result.json
 """

@@ -85,8 +85,6 @@ SEEN_APART_M = 1.5
 # wrong poses seen at all: 0 of 141 (the margin tried at 0.15-0.25 m: docs/merge-log.md)
 ARC_CLEAR_M = 0.25
 ARC_STEP_M = 0.1  # the arc is tested at points this far apart
-# the former rule, logged beside for comparison: sector centres within 15 m, no arc
-FORMER_CAP_M = 15.0
 ROOM_RES_M = 0.1  # the raster of where a robot can stand
 DISC_STEP_M = 0.2  # the disc around a prediction is tried at places this far apart
 

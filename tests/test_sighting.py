@@ -20,6 +20,7 @@ from polyswarm.sighting import (
     Sighting,
     Track,
     clear_profile,
+    contradicted_where,
     contradictions,
     distinct_places,
     mutual_seen,
@@ -67,6 +68,15 @@ def test_a_robot_predicted_inside_what_another_saw_clear_is_a_contradiction():
     assert unseen(viewer, other, (9.5, 0.0, 0.0)) == 0  # at the edge: it may be the return
     assert unseen(viewer, other, (-20.0, 3.0, 1.0)) == 0  # beyond what was seen
     assert unseen(other, viewer, (5.0, 0.0, 0.0)) == 0  # the other sent no profile
+    # the same moments as evidence, in the viewer's frame: the viewer (0, not the
+    # other: 1) at its origin, the other put 5 m ahead, from 0 s on, once a half second
+    rows = contradicted_where(viewer, other, (5.0, 0.0, 0.0))
+    assert rows.shape == (6, 6) and np.allclose(rows[:, 0], np.arange(0.0, 3.0, 0.5))
+    assert np.allclose(rows[:, 1:], [0.0, 0.0, 0.0, 5.0, 0.0])
+    # seen from the other robot's side (it is A now): the viewer is B, its moments
+    # placed in A's frame by the frame (B 5 m behind A: the viewer at (-5, 0), A at 0)
+    back = contradicted_where(other, viewer, (-5.0, 0.0, 0.0))
+    assert np.allclose(back[:, 1:], [1.0, -5.0, 0.0, 0.0, 0.0])
 
 
 # -- a ring corridor: the maps fit four ways; the robots' sightings tell them apart --------
