@@ -44,8 +44,8 @@ NO_RETURN_SHARE = 0.8
 # returns farther apart than this (plus BLOB_JUMP_SHARE of their range) from their
 # neighbour belong to different objects (``isolated_blobs``); a robot is a blob that
 # stands at least BLOB_GAP_M in front of what the beams beside it see, within
-# BLOB_RANGE_M (robots of unknown frames passing each other at 0.5-2.2 m pulled ICP
-# along corridors, 11 pose jumps of 0.2-0.5 m in 100 launches at unknown starts)
+# BLOB_RANGE_M (robots of unknown frames 0.5-2.2 m apart pulled ICP along corridors: 14
+# of 15 pose jumps of 0.2-0.5 m in 100 launches at unknown starts; none in 50 since)
 BLOB_JUMP_M = 0.1
 BLOB_JUMP_SHARE = 0.03
 BLOB_GAP_M = 0.3
