@@ -216,27 +216,42 @@ def isolated_blobs(
     consecutive beams, each within ``BLOB_JUMP_M`` (and ``BLOB_JUMP_SHARE`` of its
     range) of the next, no wider end to end than ``max_width_m``, nearer than
     ``max_range_m``, whose neighbouring beams on both sides see at least ``BLOB_GAP_M``
-    farther (or no return). Another robot in open space is one; so is a post. A run
-    at either end of a partial sweep has one neighbour only and is not one."""
+    farther (or no return). Another robot in open space is one; so is a post. On a full
+    circle the last point neighbours the first; a run at either end of a partial sweep
+    has one neighbour only and is not one."""
     xy, ok = points.xy, points.valid
     n = len(xy)
     out = np.zeros(n, dtype=bool)
     if n < 3 or not ok.any():
         return out
     r = np.hypot(xy[:, 0] - points.origin[0], xy[:, 1] - points.origin[1])
-    step = np.hypot(*np.diff(xy, axis=0).T)
-    joined = ok[:-1] & ok[1:] & (step <= BLOB_JUMP_M + BLOB_JUMP_SHARE * np.minimum(r[:-1], r[1:]))
-    starts = np.flatnonzero(ok & ~np.r_[False, joined])  # first point of each run
-    for a in starts:
-        b = a
-        while b < n - 1 and joined[b]:
-            b += 1
-        if a == 0 or b == n - 1:  # a neighbour missing (the sweep's ends)
+    nxt = np.roll(np.arange(n), -1)  # each point's next; on a partial sweep the last has none
+    step = np.hypot(*(xy[nxt] - xy).T)
+    joined = ok & ok[nxt] & (step <= BLOB_JUMP_M + BLOB_JUMP_SHARE * np.minimum(r, r[nxt]))
+    if not points.full_circle:
+        joined[-1] = False
+    elif joined.all():
+        return out  # one run all the way round: a room, not a blob
+    # runs start after a point not joined to its next; on a full circle, begin after one
+    first = int(np.flatnonzero(~joined)[0]) + 1 if points.full_circle else 0
+    order = np.roll(np.arange(n), -first)  # positions in sweep order, from a break
+    k = 0
+    while k < n:
+        a = order[k]
+        if not ok[a]:
+            k += 1
             continue
-        if np.hypot(*(xy[b] - xy[a])) > max_width_m or r[a : b + 1].max() > max_range_m:
+        run = [a]
+        while joined[run[-1]] and len(run) < n:
+            run.append(nxt[run[-1]])
+        k += len(run)
+        before, after = (a - 1) % n, nxt[run[-1]]
+        if not points.full_circle and (a == 0 or run[-1] == n - 1):
+            continue  # a neighbour missing (the sweep's ends)
+        idx = np.array(run)
+        if np.hypot(*(xy[run[-1]] - xy[a])) > max_width_m or r[idx].max() > max_range_m:
             continue
-        near = r[a : b + 1].min() + BLOB_GAP_M
-        left = not ok[a - 1] or r[a - 1] >= near
-        right = not ok[b + 1] or r[b + 1] >= near
-        out[a : b + 1] = left and right
+        near = r[idx].min() + BLOB_GAP_M
+        if (not ok[before] or r[before] >= near) and (not ok[after] or r[after] >= near):
+            out[idx] = True
     return out
