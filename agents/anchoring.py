@@ -154,9 +154,9 @@ class _Audit:
     since_s: float  # handed over then: sightings since are the audit's evidence
     last_s: float = -math.inf
     running: Future | None = None
-    contradicted: int = 0  # the latest audit's moments against the frame
-    # those moments: (other robot, time s, viewer 0 (the other) or 1 (this one), the
-    # viewer's x, y, where the frame put the one not seen x, y), metres, shared frame
+    # the latest audit's moments against the frame: (other robot, time s, viewer 0 (the
+    # other) or 1 (this one), the viewer's x, y, where the frame put the one not seen
+    # x, y), metres, shared frame
     evidence: list[tuple] = field(default_factory=list)
     conflicting: int = 0  # audits in a row whose maps conflicted
 
@@ -269,7 +269,6 @@ class Anchoring:
             if a.running is not None and a.running.done():
                 try:
                     a.evidence, share, overlap_m2 = a.running.result()
-                    a.contradicted = len(a.evidence)
                 except Exception:  # a failed audit must not stop the coordinator: retried
                     log.exception("auditing the frame of %s failed", rid)
                 else:
@@ -279,12 +278,12 @@ class Anchoring:
                         "frame of %s audited: %d moments against it; %.1f %% of the walls "
                         "shared with earlier maps (%.0f m2) in their clear space",
                         rid,
-                        a.contradicted,
+                        len(a.evidence),
                         100 * share,
                         overlap_m2,
                     )
                 a.running = None
-                if a.contradicted >= UNDO_CONTRADICTIONS or a.conflicting >= UNDO_AUDITS:
+                if len(a.evidence) >= UNDO_CONTRADICTIONS or a.conflicting >= UNDO_AUDITS:
                     out.append((rid, self._undo(rid, main, now_s)))
                     continue
             if a.running is None and now_s - a.last_s >= AUDIT_PERIOD_S:
@@ -346,7 +345,7 @@ class Anchoring:
             "robot %s: %d moments since its merge contradict its frame, its map conflicted "
             "with earlier ones in %d audits in a row: merge undone",
             rid,
-            a.contradicted,
+            len(a.evidence),
             a.conflicting,
         )
         for o, t, viewer, vx, vy, px, py in a.evidence[:UNDO_EVIDENCE_LOGGED]:
