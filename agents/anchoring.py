@@ -244,9 +244,9 @@ class Anchoring:
                 and main.merged.explored_area() >= MIN_MAP_M2
             ):
                 w.last_match_s = now_s
-                contradicts, seen_at = self._evidence(rid, main)
+                where, seen_at = self._evidence(rid, main)
                 w.matching = self._pool.submit(
-                    _match, main.merged, own, contradicts, seen_at, w.frames.candidate
+                    _match, main.merged, own, where, seen_at, w.frames.candidate
                 )
             self._rendezvous(rid, w, main)
         return out
@@ -348,20 +348,7 @@ class Anchoring:
             len(a.evidence),
             a.conflicting,
         )
-        for o, t, viewer, vx, vy, px, py in a.evidence[:UNDO_EVIDENCE_LOGGED]:
-            who, whom = (o, rid) if viewer == 0 else (rid, o)
-            log.warning(
-                "  at %.1f s %s at (%.2f, %.2f) saw clear where the frame put %s: "
-                "(%.2f, %.2f), %.1f m away",
-                t,
-                who,
-                vx,
-                vy,
-                whom,
-                px,
-                py,
-                math.hypot(px - vx, py - vy),
-            )
+        _log_evidence(rid, a.evidence, logging.WARNING)
         info = main.withdraw(rid)
         solo = self._solo(rid, info.start)  # its start, in the coordinates it speaks in
         mine = solo.robots[rid]
@@ -409,10 +396,20 @@ class Anchoring:
         except Exception:  # a failed match must not stop the coordinator: logged, retried
             log.exception("matching the map of %s failed", rid)
             return
-        if got.stale and w.frames.candidate is not None:
+        if len(got.stale) >= MIN_CONTRADICTIONS and w.frames.candidate is not None:
             # a wrong candidate would draw the robot to an empty place until a match
             # proposed another (once 150 s: the maps then matched nowhere else)
-            log.info("candidate frame of %s contradicted by the sightings: forgotten", rid)
+            x, y, th = w.frames.candidate
+            log.info(
+                "candidate frame (%.2f m, %.2f m, %.1f deg) of %s contradicted by %d "
+                "moments of the sightings: forgotten",
+                x,
+                y,
+                math.degrees(th),
+                rid,
+                len(got.stale),
+            )
+            _log_evidence(rid, got.stale, logging.INFO)
             w.frames.forget_candidate()
             w.seen_at_candidate = 0
         m = got.match
@@ -463,15 +460,12 @@ class Anchoring:
         maps = (main.merged, self.waiting[rid].solo.robots[rid].map)
         where = _contradicted_where(theirs, mine, maps)
 
-        def contradicts(frame: np.ndarray) -> bool:
-            return len(where(frame)) >= MIN_CONTRADICTIONS
-
         def seen_at(frame: np.ndarray) -> int:
             """Places in the shared frame, all robots' sightings."""
             places = [mutual_seen(t, mine, frame, maps) for t in theirs.values()]
             return distinct_places(np.vstack(places))
 
-        return contradicts, seen_at
+        return where, seen_at
 
     def on_pose(self, rid: str, frame: int, map_version: int, main, own: bool = False) -> bool:
         """A pose of ``rid`` naming ``frame`` at its map ``map_version``: hands the robot
@@ -514,6 +508,26 @@ class Anchoring:
         return True
 
 
+def _log_evidence(rid: str, rows, level: int) -> None:
+    """The first ``UNDO_EVIDENCE_LOGGED`` moments that contradict a frame of ``rid``
+    (``_Audit.evidence``'s rows): who looked from where, and where the frame put the other."""
+    for o, t, viewer, vx, vy, px, py in list(rows)[:UNDO_EVIDENCE_LOGGED]:
+        who, whom = (o, rid) if viewer == 0 else (rid, o)
+        log.log(
+            level,
+            "  at %.1f s %s at (%.2f, %.2f) saw clear where the frame put %s: "
+            "(%.2f, %.2f), %.1f m away",
+            t,
+            who,
+            vx,
+            vy,
+            whom,
+            px,
+            py,
+            math.hypot(px - vx, py - vy),
+        )
+
+
 def _contradicted_where(theirs: dict[str, Track], mine: Track, maps):
     """A function of a frame of ``mine``'s robot (in the frame of ``maps[0]``): the
     moments the sightings contradict it (``polyswarm.sighting.contradicted_where``, over
@@ -541,15 +555,20 @@ class _Matched:
     match: MapMatch | None  # None: no match (``why``)
     why: str = ""
     seen: int = 0  # places the robots saw each other at its pose
-    stale: bool = False  # the candidate frame it started with is contradicted now
+    # the moments that contradict the candidate frame it started with (``_Audit.evidence``'s
+    # rows): at least ``MIN_CONTRADICTIONS`` and it is stale
+    stale: tuple = ()
 
 
-def _match(merged, own, contradicts, seen_at, candidate=None) -> _Matched:
+def _match(merged, own, where, seen_at, candidate=None) -> _Matched:
     """``match_maps`` of a robot's map on the merged map (its images unchecked: two more
     searches, three times the time, to tell what the sightings tell), and the places the
-    robots saw each other at the pose it found (0 without sightings). ``candidate``: the
-    frame the robot is being sent to meet the others by, checked against the sightings."""
-    stale = candidate is not None and contradicts is not None and contradicts(candidate)
+    robots saw each other at the pose it found (0 without sightings). ``where``: the
+    moments the sightings contradict a frame (``_contradicted_where``; None without
+    sightings). ``candidate``: the frame the robot is being sent to meet the others by,
+    checked against the sightings."""
+    contradicts = None if where is None else (lambda f: len(where(f)) >= MIN_CONTRADICTIONS)
+    stale = tuple(where(candidate)) if candidate is not None and where is not None else ()
     try:
         m = match_maps(merged, own, contradicts, images=False)
     except (MatchError, PolyswarmError) as e:
