@@ -163,6 +163,15 @@ class Track:
         xy = np.array([s.pose[:2] for s in self._items], dtype=float).reshape(-1, 2)
         return t, xy
 
+    def paths(self) -> list[np.ndarray]:
+        """Where the robot went: its positions as polylines ((n, 2) each), split where
+        poses are more than ``MAX_GAP_S`` apart."""
+        if not self._items:
+            return []
+        t, xy = self._arrays()
+        cut = np.flatnonzero(np.diff(t) > MAX_GAP_S) + 1
+        return np.split(xy, cut)
+
     def positions_at(self, times: np.ndarray) -> np.ndarray:
         """(n, 2) positions at ``times``, interpolated; NaN where no two poses within
         ``MAX_GAP_S`` bracket a time."""

@@ -14,6 +14,7 @@ from polyswarm.mapmatch import (
     MIN_SEEN,
     FrameEstimate,
     MapMatch,
+    fit_at,
     frame_error,
     match_maps,
     transform_map,
@@ -86,6 +87,39 @@ def test_a_moved_part_of_the_building_is_found_where_it_is(pose):
     err_m, err_rad = frame_error(m.pose, pose)
     assert err_m < 0.03 and err_rad < math.radians(0.3), m.summary()
     assert m.overlap_m2 > 30 and m.conflict_share < 0.01
+
+
+def test_walls_seen_on_the_other_robot_where_it_went_are_no_conflict():
+    """B's robot saw A's robot eight times in the corridor: walls in the middle of it,
+    where A's map is clear (A stood there). Taken for walls of the building they refuse
+    the true pose; with A's path given, walls wholly within its band are no conflict."""
+    pose = np.array([4.0, -3.0, 2.1])
+    path = np.array([[9.0, 1.0], [12.0, 1.05], [15.0, 1.0]])  # A's, in A's frame
+    seen_at = np.linspace(9.2, 14.8, 8)
+    body = 0.2  # the robot's radius, m; its outline in vectors about a lidar step long
+    bodies = shapely.union_all([shapely.Point(x, 1.0).buffer(body, quad_segs=2) for x in seen_at])
+    building = _building()
+    part = shapely.difference(shapely.intersection(building, box(8, -8, 25, 9)), bodies)
+    walls = shapely.union(building.boundary, bodies.boundary)
+    b = transform_map(GridPolyMap.from_polygons(_typed(part, walls), CELL_M), inverse(pose))
+    a = _seen(box(-1, -8, 16, 9))
+    at_truth = fit_at([a], b, pose)[0]["conflict_share"]
+    assert at_truth > 0.1  # the bodies' outlines, in A's clear corridor
+    assert fit_at([a], b, pose, paths=[path])[0]["conflict_share"] < 0.01
+    # the paths only spare walls near them: a path elsewhere spares nothing
+    elsewhere = fit_at([a], b, pose, paths=[path + np.array([0.0, -5.0])])[0]["conflict_share"]
+    assert elsewhere == pytest.approx(at_truth)
+    # a wall across the corridor where A went is the building's: it reaches out of the band
+    across = shapely.difference(part, box(12.9, -0.5, 13.1, 2.5))
+    walls_across = shapely.union(walls, box(12.9, -0.5, 13.1, 2.5).boundary)
+    typed = _typed(across, walls_across)
+    b_across = transform_map(GridPolyMap.from_polygons(typed, CELL_M), inverse(pose))
+    assert fit_at([a], b_across, pose, paths=[path])[0]["conflict_share"] > 0.01
+    assert not match_maps(a, b).accepted
+    m = match_maps(a, b, a_paths=[path])
+    assert m.accepted, m.summary()
+    err_m, err_rad = frame_error(m.pose, pose)
+    assert err_m < 0.03 and err_rad < math.radians(0.3), m.summary()
 
 
 def test_maps_that_share_no_space_are_not_merged():

@@ -58,6 +58,15 @@ def test_positions_are_interpolated_only_between_close_poses():
     assert np.isnan(got[1:]).all()  # 4 s between poses; after the last one
 
 
+def test_a_tracks_paths_break_where_poses_are_far_apart_in_time():
+    t = Track()
+    assert t.paths() == []
+    for s, x in ((0.0, 0.0), (1.0, 1.0), (5.0, 2.0), (5.5, 2.5)):
+        t.add(Sighting(s, (x, 0.0, 0.0)))
+    got = t.paths()
+    assert [p[:, 0].tolist() for p in got] == [[0.0, 1.0], [2.0, 2.5]]  # 4 s gap: no line
+
+
 def test_a_robot_predicted_inside_what_another_saw_clear_is_a_contradiction():
     viewer, other = Track(), Track()
     clear_10m = bytes([int(10 / CLEAR_UNIT_M)] * SECTORS)

@@ -134,7 +134,7 @@ def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> lis
 
         t0 = time.perf_counter()
         try:
-            m = match_maps(a, b, contradicts)
+            m = match_maps(a, b, contradicts, a_paths=seen_a.paths(), b_paths=seen_b.paths())
         except MatchError:
             m = None
         row["ours_s"] = time.perf_counter() - t0
