@@ -215,14 +215,28 @@ def _view(pmap: GridPolyMap, paths=()) -> _MapView:
     wall_px[ij[:, 0], ij[:, 1]] = False
     dist = distance_transform_edt(wall_px) * RESOLUTION_M
     hit = np.exp(-0.5 * (dist / HIT_SIGMA_M) ** 2)
-    explored = _rasterise(pmap, lo, shape)
     # clear: deeper than CLEAR_M inside the explored space (from walls and frontiers alike:
     # space seen only up to a frontier may end short of a wall the other robot saw)
-    deep = distance_transform_edt(explored) * RESOLUTION_M > CLEAR_M
+    deep = _deeper_than(region, CLEAR_M, _rasterise(pmap, lo, shape), lo)
     trodden = _trodden(paths, lo, shape)
     clear = (deep & ~trodden).astype(float)
     chain = _chains(s, e)[w.owner]
     return _MapView(walls, s, e, region, lo, hit, clear, dist, normals, deep, trodden, chain)
+
+
+def _deeper_than(region, depth_m: float, explored: np.ndarray, lo: np.ndarray) -> np.ndarray:
+    """The raster cells (of those ``explored`` marks) whose centres lie deeper than
+    ``depth_m`` inside ``region``, measured on the polygons. (Measured on the raster, a
+    wall seen 0.1 m inside the other map's walls counted as in its clear space: a drawn
+    polygon covers every cell its outline touches, and cell centres are up to a diagonal
+    off. The TurtleBot3 office at unknown starts, seed 0: 2-3 % of the walls at the true
+    frames, 0.0 % on the polygons.)"""
+    inner = shapely.buffer(region, -depth_m)
+    ij = np.argwhere(explored)
+    centres = (ij + 0.5) * RESOLUTION_M + lo
+    out = np.zeros(explored.shape, dtype=bool)
+    out[ij[:, 0], ij[:, 1]] = shapely.contains_xy(inner, centres[:, 0], centres[:, 1])
+    return out
 
 
 def _chains(starts: np.ndarray, ends: np.ndarray) -> np.ndarray:

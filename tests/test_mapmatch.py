@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import shapely
+import shapely.affinity
 from shapely.geometry import box
 
 from polyswarm.mapmatch import (
@@ -87,6 +88,21 @@ def test_a_moved_part_of_the_building_is_found_where_it_is(pose):
     err_m, err_rad = frame_error(m.pose, pose)
     assert err_m < 0.03 and err_rad < math.radians(0.3), m.summary()
     assert m.overlap_m2 > 30 and m.conflict_share < 0.01
+
+
+def test_clear_space_is_what_lies_deeper_than_clear_m_inside_the_explored_space():
+    """On a room turned 30 degrees (no wall along the raster), the cells counted clear
+    are exactly those whose centres lie more than CLEAR_M inside: none nearer a wall."""
+    from polyswarm.mapmatch import CLEAR_M, RESOLUTION_M, _view
+
+    room = shapely.affinity.rotate(box(0, 0, 4, 3), 30, origin=(0, 0))
+    v = _view(GridPolyMap.from_polygons(_typed(room, room.boundary), CELL_M))
+    ij = np.indices(v.deep.shape).reshape(2, -1).T
+    centres = shapely.points((ij + 0.5) * RESOLUTION_M + v.lo)
+    depth = np.where(shapely.contains(room, centres), shapely.distance(room.boundary, centres), 0)
+    deep = v.deep.reshape(-1)
+    assert deep.any() and depth[deep].min() > CLEAR_M
+    assert not (depth > CLEAR_M + 1e-6)[~deep].any()
 
 
 def test_walls_seen_on_the_other_robot_where_it_went_are_no_conflict():
