@@ -553,6 +553,24 @@ def _decide(refined: list, candidates: int, contradicted: int = 0) -> MapMatch:
     )
 
 
+def fitting_rivals(m: MapMatch) -> list[np.ndarray]:
+    """The other refined poses of ``m`` where the maps fit as well, without contradiction
+    (apart from ``m.pose``): in a symmetric building, the images of the truth (or the
+    truth, when an image scored best)."""
+    return [
+        pose
+        for pose, ev in m.refined
+        if not _close(pose, m.pose, RIVAL_APART_M, RIVAL_APART_RAD) and not _inconsistency(ev)
+    ]
+
+
+def verdict_at(m: MapMatch, pose: np.ndarray) -> MapMatch:
+    """``m``'s verdict on another of its refined poses, ``m.pose`` among its rivals."""
+    chosen = [r for r in m.refined if r[0] is pose]
+    rest = [r for r in m.refined if r[0] is not pose]
+    return _decide(chosen + rest, m.candidates, m.contradicted)
+
+
 def transform_map(pmap: GridPolyMap, pose) -> GridPolyMap:
     """The map moved by ``pose`` (x m, y m, theta rad): cut into cells again, version 0."""
     polys = []

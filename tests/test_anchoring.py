@@ -503,3 +503,32 @@ def test_a_restarted_coordinator_leaves_a_robot_whose_frame_was_withdrawn_waitin
     assert frames.on_pose("r3", 1, 0, main)  # anchored before the restart: handed over
     assert "r3" not in frames.waiting
     frames.close()
+
+
+def test_a_match_proposes_the_image_of_the_frame_the_robots_saw_each_other_at():
+    """A square room fits four ways; when the robots saw each other only where an image
+    that did not score best puts them, the match proposes that image."""
+    from agents.anchoring import _match
+    from polyswarm.mapmatch import MIN_SEEN, fitting_rivals, frame_error, match_maps
+    from polyswarm.polymap import Ring, TypedPolygon, VectorType
+
+    xy = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]])
+    room = TypedPolygon(Ring(xy, np.full(4, VectorType.OBSTACLE)), ())
+    a = GridPolyMap.from_polygons([room], 2.0)
+    b = transform_map(a, (1.0, 2.0, 0.3))
+    best = match_maps(a, b, images=False)
+    rivals = fitting_rivals(best)
+    assert len(rivals) >= 2  # the other quarter turns
+    truth = rivals[-1]
+
+    def seen_at(pose) -> int:
+        err_m, err_rad = frame_error(pose, truth)
+        return MIN_SEEN if err_m < 0.3 and err_rad < math.radians(3) else 0
+
+    assert seen_at(best.pose) == 0
+    got = _match(a, b, None, seen_at)
+    assert got.seen == MIN_SEEN and got.match.proposed
+    err_m, err_rad = frame_error(got.match.pose, truth)
+    assert err_m < 0.01 and err_rad < 1e-3
+    unseen = _match(a, b, None, lambda pose: 0)  # nobody seen anywhere: the best, as before
+    assert frame_error(unseen.match.pose, best.pose)[0] < 0.01 and unseen.seen == 0
