@@ -107,10 +107,7 @@ WRONG_ANCHOR_ENV = "POLYSWARM_WRONG_ANCHOR"
 # places the robots were seen at a candidate frame before the waiting robot tours
 # standpoints ahead of its own frontiers: matches at wrong poses were seen anywhere 13
 # times of 892, at right ones 552 of 1,003 (50 launches, launch-sightings-arc.json); a
-# tour at a wrong frame finds nobody and the sightings then forget it. A candidate the
-# maps alone accept (no rival, no fitting image among the refined poses) is toured at
-# once: on the maze (seed 4) a right frame accepted with a 100-167 m margin waited 150 s
-# for the robots to meet while the robot explored its own frontiers
+# tour at a wrong frame finds nobody and the sightings then forget it
 TOUR_FIRST_SEEN = 1
 
 
@@ -143,7 +140,6 @@ class _Waiting:
     matching: Future | None = None
     matches: int = 0
     seen_at_candidate: int = 0  # places the robots were seen at the candidate frame
-    candidate_accepted: bool = False  # the maps alone accept the candidate frame
     anchor: Anchor | None = None  # sent, not yet named by the robot's poses
     anchor_sent_s: float = -math.inf
     # the anchor its poses name while it waits: 0 (its start's frame), or the ``own``
@@ -395,7 +391,7 @@ class Anchoring:
         solo.rendezvous, solo.tour_first = {}, set()
         if frame is None or me is None or not others:
             return
-        if w.seen_at_candidate >= TOUR_FIRST_SEEN or w.candidate_accepted:
+        if w.seen_at_candidate >= TOUR_FIRST_SEEN:
             solo.tour_first = {rid}
         there = transform_points(inverse(frame), np.array([r.pose[:2] for r in others]))
         k = int(np.argmin(np.hypot(*(there - me[:2]).T)))
@@ -426,7 +422,7 @@ class Anchoring:
             )
             _log_evidence(rid, got.stale, logging.INFO)
             w.frames.forget_candidate()
-            w.seen_at_candidate, w.candidate_accepted = 0, False
+            w.seen_at_candidate = 0
         m = got.match
         if m is None:
             log.info("map of %s not matched: %s", rid, got.why)
@@ -435,7 +431,7 @@ class Anchoring:
         before = w.frames.pose
         w.frames.add(m, got.seen)
         if m.proposed:  # the candidate is this match's pose now
-            w.seen_at_candidate, w.candidate_accepted = got.seen, m.accepted
+            w.seen_at_candidate = got.seen
         log.info(
             "map of %s against the merged map (match %d): %s, seen %d time(s)%s",
             rid,
