@@ -565,8 +565,11 @@ def fitting_rivals(m: MapMatch) -> list[np.ndarray]:
 
 
 def verdict_at(m: MapMatch, pose: np.ndarray) -> MapMatch:
-    """``m``'s verdict on another of its refined poses, ``m.pose`` among its rivals."""
+    """``m``'s verdict on another of its refined poses (one ``fitting_rivals`` gave),
+    ``m.pose`` among its rivals."""
     chosen = [r for r in m.refined if r[0] is pose]
+    if not chosen:
+        raise ValueError("verdict_at: the pose is not one of the match's refined poses")
     rest = [r for r in m.refined if r[0] is not pose]
     return _decide(chosen + rest, m.candidates, m.contradicted)
 

@@ -509,7 +509,7 @@ def test_a_match_proposes_the_image_of_the_frame_the_robots_saw_each_other_at():
     """A square room fits four ways; when the robots saw each other only where an image
     that did not score best puts them, the match proposes that image."""
     from agents.anchoring import _match
-    from polyswarm.mapmatch import MIN_SEEN, fitting_rivals, frame_error, match_maps
+    from polyswarm.mapmatch import MIN_SEEN, fitting_rivals, frame_error, match_maps, verdict_at
     from polyswarm.polymap import Ring, TypedPolygon, VectorType
 
     xy = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]])
@@ -530,5 +530,7 @@ def test_a_match_proposes_the_image_of_the_frame_the_robots_saw_each_other_at():
     assert got.seen == MIN_SEEN and got.match.proposed
     err_m, err_rad = frame_error(got.match.pose, truth)
     assert err_m < 0.01 and err_rad < 1e-3
+    with pytest.raises(ValueError):
+        verdict_at(best, truth.copy())  # a pose that is not one of the match's own
     unseen = _match(a, b, None, lambda pose: 0)  # nobody seen anywhere: the best, as before
     assert frame_error(unseen.match.pose, best.pose)[0] < 0.01 and unseen.seen == 0
