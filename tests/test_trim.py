@@ -2,7 +2,7 @@
 
 import numpy as np
 import shapely
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from polyswarm.keyframe import keyframe_polygon
@@ -160,6 +160,7 @@ def test_a_chord_never_swallows_a_mapped_pillar():
     st.floats(0.5, 5.5),
     st.integers(0, 10_000),
 )
+@example(4.90625, 1.625, 0.6875, 2.84375, 1)  # found by a CI run: a noise sliver, not a trim
 def test_a_scan_beside_a_pillar_never_trims_it_away(px, py, rx, ry, seed):
     """Property: in a room explored all round a pillar, a lidar keyframe taken anywhere
     and trimmed explores no more of the pillar than the keyframe itself (which cuts a
@@ -186,4 +187,7 @@ def test_a_scan_beside_a_pillar_never_trims_it_away(px, py, rx, ry, seed):
     core = pillar.buffer(-0.05)
     trimmed = shapely.intersection(_region(pmap.merge(out, OPTS).map), core).area
     whole = shapely.intersection(_region(pmap.merge(kf, OPTS).map), core).area
-    assert trimmed <= whole + 1e-9
+    # the keyframe's own noisy corner of the pillar may survive the merge of the trimmed
+    # polygon where the merge of the whole dropped it as a sliver (6e-5 m2, example below)
+    own = shapely.intersection(kf.to_shapely(), core).area
+    assert trimmed <= max(whole, own) + 1e-6  # (snapped to the map's grid on merging)
