@@ -76,7 +76,7 @@ ICP_MAX_SHIFT_M = 3.0  # ICP that wanders farther from the search's pose has div
 # and the true frame was refused for 1.7-3.7 % conflicts for 150 s while a wrong one
 # stood at 0.0-0.5 %. Over the frames logged in that launch and two office ones, at the
 # final maps: the right ones' conflicts fell from 0.0-1.1 % to 0.0-0.25 %, the wrong
-# ones' by at most 3 percentage points (4 of 20 changed)
+# ones' by at most 3 percentage points (6 of 23 changed)
 TRODDEN_M = BODY_M
 INLIER_M = 0.15  # a wall point this close to the other's wall agrees with it
 MIN_OVERLAP_M2 = 10.0  # explored area both maps share, at least (about two rooms' worth)
