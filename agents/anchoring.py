@@ -247,9 +247,9 @@ class Anchoring:
                 and main.merged.explored_area() >= MIN_MAP_M2
             ):
                 w.last_match_s = now_s
-                where, seen_at, paths = self._evidence(rid, main)
+                where, seen_at, tracks = self._evidence(rid, main)
                 w.matching = self._pool.submit(
-                    _match, main.merged, own, where, seen_at, w.frames.candidate, paths
+                    _match, main.merged, own, where, seen_at, w.frames.candidate, tracks
                 )
             self._rendezvous(rid, w, main)
         return out
@@ -326,18 +326,18 @@ class Anchoring:
         }
         own = info.map
         # every map here is in the shared frame: where any robot went, before the audit
-        # began as well, a wall is no conflict
-        paths = [
-            p
+        # began as well, a wall is no conflict (copies here, paths in the audit's thread)
+        everyone = [
+            self.tracks[o].since(other.corrected_s)
             for o, other in main.robots.items()
             if o in self.tracks
-            for p in self.tracks[o].since(other.corrected_s).paths()
         ]
         seen = mine is not None and len(mine) > 0 and bool(theirs)
         where = _contradicted_where(theirs, mine, (main.merged, own)) if seen else None
 
         def audit() -> tuple[list[tuple], float, float]:
             moments = where(np.zeros(3)) if where is not None else []
+            paths = [p for t in everyone for p in t.paths()]
             fits = fit_at([m for _, m in earlier], own, np.zeros(3), paths, paths)
             roots = [ev for (root, _), ev in zip(earlier, fits, strict=True) if root]
             if sum(ev["overlap_m2"] for ev in roots) < MIN_OVERLAP_M2:
@@ -457,8 +457,9 @@ class Anchoring:
         """Two tests of a frame of ``rid`` (its frame in the shared one) on copies of the
         sightings so far, for the matching thread: the moments that contradict it
         (``_contradicted_where``), and how often the robots saw each other where it puts
-        them (None, None without sightings); and where the robots went (the swarm's
-        robots in the shared frame, ``rid`` in its own: ``match_maps``' paths). A robot's
+        them (None, None without sightings); and the copies of the tracks (the swarm's
+        robots' in the shared frame, ``rid``'s in its own or None) whose paths the match
+        spares walls along (``_match``). A robot's
         poses from before its latest large correction are left out (they were sent from
         a frame that far off its map now)."""
         mine = self.tracks.get(rid)
@@ -469,12 +470,9 @@ class Anchoring:
         }
         if mine is not None:
             mine = mine.since(self.waiting[rid].solo.robots[rid].corrected_s)
-        paths = (
-            [p for t in theirs.values() for p in t.paths()],
-            mine.paths() if mine is not None else [],
-        )
+        tracks = (list(theirs.values()), mine)
         if mine is None or not theirs:
-            return None, None, paths
+            return None, None, tracks
         maps = (main.merged, self.waiting[rid].solo.robots[rid].map)
         where = _contradicted_where(theirs, mine, maps)
 
@@ -483,7 +481,7 @@ class Anchoring:
             places = [mutual_seen(t, mine, frame, maps) for t in theirs.values()]
             return distinct_places(np.vstack(places))
 
-        return where, seen_at, paths
+        return where, seen_at, tracks
 
     def on_pose(self, rid: str, frame: int, map_version: int, main, own: bool = False) -> bool:
         """A pose of ``rid`` naming ``frame`` at its map ``map_version``: hands the robot
@@ -578,17 +576,21 @@ class _Matched:
     stale: tuple = ()
 
 
-def _match(merged, own, where, seen_at, candidate=None, paths=((), ())) -> _Matched:
+def _match(merged, own, where, seen_at, candidate=None, tracks=((), None)) -> _Matched:
     """``match_maps`` of a robot's map on the merged map (its images unchecked: two more
     searches, three times the time, to tell what the sightings tell), and the places the
     robots saw each other at the pose it found (0 without sightings). ``where``: the
     moments the sightings contradict a frame (``_contradicted_where``; None without
     sightings). ``candidate``: the frame the robot is being sent to meet the others by,
-    checked against the sightings. ``paths``: where the robots of each map went."""
+    checked against the sightings. ``tracks``: the merged map's robots' tracks and the
+    waiting robot's (or None), whose paths spare walls (``match_maps``)."""
     contradicts = None if where is None else (lambda f: len(where(f)) >= MIN_CONTRADICTIONS)
     stale = tuple(where(candidate)) if candidate is not None and where is not None else ()
     try:
-        m = match_maps(merged, own, contradicts, images=False, a_paths=paths[0], b_paths=paths[1])
+        theirs, mine = tracks
+        a_paths = [p for t in theirs for p in t.paths()]
+        b_paths = mine.paths() if mine is not None else []
+        m = match_maps(merged, own, contradicts, images=False, a_paths=a_paths, b_paths=b_paths)
     except (MatchError, PolyswarmError) as e:
         return _Matched(None, str(e), stale=stale)
     if seen_at is None or not m.proposed:
