@@ -68,6 +68,11 @@ WALL_CLEAR_M = 0.6
 # a robot's centre is at least this far from a wall of the map it stands in (TurtleBot3
 # Burger: 0.105 m; map walls are line fits, a few centimetres off)
 ROOM_CLEAR_M = 0.1
+# where a frame puts a robot, the viewer may have mapped its body (a wall and a shadow):
+# within this of the prediction the robot may stand wherever its own map lets it. Only
+# the body's reach: farther, a wrong frame's prediction inside the viewer's walls would
+# stand there too, and go uncontradicted
+FOOTPRINT_M = BODY_M + ROOM_CLEAR_M
 # sightings count in places this far apart: a quarter turn (or more) about a point moves a
 # place within 0.8 m of it by at most 1.1 m (NEAR_M + BODY_M), a sighting's reach; three
 # places 1.5 m apart cannot all lie within 0.8 m of one point (their circle: 0.87 m)
@@ -241,7 +246,9 @@ _DISC = np.array(
 )
 
 
-def unseen(viewer: Track, other: Track, frame, room: Room | None = None) -> int:
+def unseen(
+    viewer: Track, other: Track, frame, room: Room | None = None, other_room: Room | None = None
+) -> int:
     """Moments where ``frame`` (the other robot's frame in the viewer's, x m, y m, rad)
     puts the other robot where the viewer's scan saw clear: anywhere within ``NEAR_M`` of
     the predicted position, the robot would have been nearer than the nearest return of
@@ -250,11 +257,19 @@ def unseen(viewer: Track, other: Track, frame, room: Room | None = None) -> int:
     Without ``room`` every sector the disc reaches must be clear beyond the disc: a wall
     within ``NEAR_M`` of the prediction hides it, and along a corridor that is every
     prediction. With ``room`` (the viewer's map, ``Room``) only the disc's places where a
-    robot can stand count: each must lie within its sector's clear distance."""
-    return len(unseen_where(viewer, other, frame, room)[0])
+    robot can stand count: each must lie within its sector's clear distance.
+    ``other_room`` (the other robot's map, in its frame) adds the places within
+    ``FOOTPRINT_M`` of the prediction where its own map lets it stand: the viewer mapped
+    the other's body where it stood (as a wall, with a shadow behind), so in the viewer's
+    map alone only the places beside the body were left, all in clear view past it, and
+    the truth was contradicted at the moments the robots saw each other (loop launch,
+    seed 0: two waiting robots 10.6 m apart)."""
+    return len(unseen_where(viewer, other, frame, room, other_room)[0])
 
 
-def unseen_where(viewer: Track, other: Track, frame, room: Room | None = None):
+def unseen_where(
+    viewer: Track, other: Track, frame, room: Room | None = None, other_room: Room | None = None
+):
     """``unseen``'s moments, as evidence for a log: (times (n,) seconds, the viewer's
     poses (n, 3), where the frame put the other robot (n, 2), metres, viewer's frame)."""
     pred = _predictions(viewer, other, frame)
@@ -262,7 +277,8 @@ def unseen_where(viewer: Track, other: Track, frame, room: Room | None = None):
         return np.zeros(0), np.zeros((0, 3)), np.zeros((0, 2))
     t, poses, clear, p, d, bearing = pred
     if room is not None:
-        hit = _unseen_in_room(poses, clear, p, room)
+        mine = None if other_room is None else (other_room, inverse(np.asarray(frame, float)))
+        hit = _unseen_in_room(poses, clear, p, room, mine)
         return t[hit], poses[hit], p[hit]
     rows = np.arange(len(d))
     half = np.arcsin(NEAR_M / d)  # the disc's half-angle as the viewer sees it
@@ -297,12 +313,19 @@ def _predictions(viewer: Track, other: Track, frame):
     return t[ok], poses[ok], clear[ok], p[ok], d[ok], bearing
 
 
-def _unseen_in_room(poses: np.ndarray, clear: np.ndarray, p: np.ndarray, room: Room) -> np.ndarray:
+def _unseen_in_room(
+    poses: np.ndarray, clear: np.ndarray, p: np.ndarray, room: Room, other=None
+) -> np.ndarray:
     """``unseen`` with the disc cut to where a robot can stand (see there): per
-    prediction, contradicted or not."""
+    prediction, contradicted or not. ``other``: (the other robot's ``Room``, the
+    viewer's frame in its frame)."""
     n, m = len(p), len(_DISC)
     pts = (p[:, None, :] + _DISC[None, :, :]).reshape(-1, 2)
-    can = room.allows(pts).reshape(n, m)
+    can = room.allows(pts)
+    if other is not None:  # its body's footprint, where its own map lets it stand
+        body = np.tile(np.hypot(_DISC[:, 0], _DISC[:, 1]) <= FOOTPRINT_M, n)
+        can |= body & other[0].allows(transform_points(other[1], pts))
+    can = can.reshape(n, m)
     rel = pts.reshape(n, m, 2) - poses[:, None, :2]
     dist = np.hypot(rel[..., 0], rel[..., 1])
     bearing = np.arctan2(rel[..., 1], rel[..., 0]) - poses[:, 2:3]
@@ -416,7 +439,7 @@ def contradicted_where(
     ra, rb = rooms if rooms is not None else (None, None)
     rows = []
     for viewer, (t, poses, p) in enumerate(
-        (unseen_where(a, b, frame, ra), unseen_where(b, a, inverse(frame), rb))
+        (unseen_where(a, b, frame, ra, rb), unseen_where(b, a, inverse(frame), rb, ra))
     ):
         at, there = poses[:, :2], p
         if viewer == 1:  # B's frame to A's

@@ -149,6 +149,42 @@ def profile_with_a_robot_at(xy, clear_m: float = 10.0) -> bytes:
     return bytes(out)
 
 
+def test_a_robot_whose_body_the_viewer_mapped_is_not_contradicted_where_it_stood():
+    """The viewer at (0, 0) watched the other robot stand 10 m down the corridor: a return
+    9.8 m out in one sector, and its map holds the body (a wall) with its shadow behind,
+    the sector's width. In the viewer's map alone, the places left to stand in the disc
+    are beside the shadow or in front of the body, all in clear view: the truth was
+    contradicted. The other robot's own map (no body in it) lets it stand at its
+    footprint: not contradicted. A frame 5 m nearer, where the viewer saw the corridor
+    clear, still is."""
+    step = 2 * math.pi / SECTORS
+    body = SECTORS // 2  # the sector of bearings 0 to 2.8 degrees
+    profile = np.zeros(SECTORS, dtype=np.uint8)
+    for k in range(SECTORS):  # the corridor's walls, and the body 9.8 m out
+        b = (k + 0.5) * step - math.pi
+        r = 25.0 if abs(math.sin(b)) < 1e-9 else min(25.0, 1.0 / abs(math.sin(b)))
+        profile[k] = min(255, int(r / CLEAR_UNIT_M)) if math.cos(b) > 0 else 2
+    profile[body] = int(9.8 / CLEAR_UNIT_M)
+    viewer, other = Track(), Track()
+    for s in np.arange(0.0, 3.0, 0.5):
+        viewer.add(Sighting(s, (0.0, 0.0, 0.0), bytes(profile)))
+        other.add(Sighting(s, (0.0, 0.0, 0.0)))
+    hall = box(-0.5, -1.0, 30.0, 1.0)
+    shadow = shapely.Polygon(
+        [(9.8, 0.0), (30.0, 0.0), (30.0, 30.0 * math.tan(step)), (9.8, 9.8 * math.tan(step))]
+    )
+    walls = shapely.union(hall.boundary, shapely.LineString([(9.8, 0.0), (9.8, 0.5)]))
+    mapped = GridPolyMap.from_polygons(_typed(shapely.difference(hall, shadow), walls), CELL_M)
+    truth = np.array([10.0 * math.cos(step / 2), 10.0 * math.sin(step / 2), 0.0])
+    own = transform_map(_corridor_map(), inverse(truth))  # the other's map, its own frame
+    assert unseen(viewer, other, truth, Room(mapped)) == 6  # beside its body: contradicted
+    assert unseen(viewer, other, truth, Room(mapped), Room(own)) == 0
+    assert contradictions(viewer, other, truth, (Room(mapped), Room(own))) == 0
+    nearer = truth - np.array([5.0, 0.0, 0.0])
+    own_nearer = transform_map(_corridor_map(), inverse(nearer))
+    assert unseen(viewer, other, nearer, Room(mapped), Room(own_nearer)) == 6
+
+
 def test_sightings_count_in_places_not_moments():
     """A robot seen six times standing in one place tells a frame from its rotations
     about that place no better than seen once; seen in three places 1.5 m apart, no
