@@ -232,7 +232,8 @@ class RobotAgent:
         if a.own:
             self._withdrawn(a)
             return
-        log.info("%s: anchor %d: moving into the shared frame", self.id, a.frame)
+        into = "a team's frame" if a.team else "the shared frame"
+        log.info("%s: anchor %d: moving into %s", self.id, a.frame, into)
         self._anchor = a
         self.slam.anchor((a.x, a.y, a.theta))
 
@@ -250,17 +251,20 @@ class RobotAgent:
         return n
 
     def _anchored(self, now_s: float) -> None:
-        """SLAM moved into the anchor's frame in this step: so do the start, goals, peers."""
+        """SLAM moved into the anchor's frame in this step: so do the start, goals, peers.
+        A team's frame (``Anchor.team``) is not the shared one: the robot's coordinates
+        stay a frame of its own, as far as the swarm is concerned."""
         a, self._anchor = self._anchor, None
         frame = np.array([a.x, a.y, a.theta])
-        self.frame, self.own_frame = a.frame, False
+        self.frame, self.own_frame = a.frame, a.team
         self.start_pose = compose(frame, self.start_pose)
         self.behaviour.on_assignment(Assignment(AssignmentKind.STOP, -1), now_s, self.pose)
         self.behaviour.move_frame(frame)
         self.seen = SeenObstacles()  # seen in the old frame: the next scans see them again
         self.peers.clear()
         self.merged = self.merged_graph = None  # the merged map is fetched afresh
-        log.info("%s: in the shared frame (anchor %d), at %s", self.id, a.frame, self.pose)
+        where = "a team's frame" if a.team else "the shared frame"
+        log.info("%s: in %s (anchor %d), at %s", self.id, where, a.frame, self.pose)
 
     def _withdrawn(self, a: Anchor) -> None:
         """The frame anchored so far was found wrong: map, pose and start stay where they

@@ -410,7 +410,12 @@ class Anchor(Message):
     ``own``: the frame the robot was anchored to so far was found wrong (later
     evidence contradicted it) and is withdrawn. The robot moves nothing (``x``, ``y``,
     ``theta`` are 0): the coordinates it speaks in become a frame of its own again,
-    until the next anchor."""
+    until the next anchor.
+
+    ``team``: the pose is of the robot's frame in the frame of another robot whose frame
+    is not known either (their maps were matched with each other): the robot moves as
+    for any anchor, but the coordinates it speaks in are that team's frame, not the
+    shared one (its poses say ``own``), until the next anchor places the team."""
 
     TYPE: ClassVar[str] = "anchor"
     frame: int
@@ -418,25 +423,32 @@ class Anchor(Message):
     y: float
     theta: float
     own: bool = False
+    team: bool = False
 
     def body(self) -> dict:
         b = {"frame": self.frame, "x": self.x, "y": self.y, "th": self.theta}
         if self.own:
             b["own"] = 1
+        if self.team:
+            b["team"] = 1
         return b
 
     @classmethod
     def from_body(cls, b: dict) -> Anchor:
         own = _int(b.get("own", 0), "own", 0, 1) == 1
+        team = _int(b.get("team", 0), "team", 0, 1) == 1
         a = cls(
             _int(b.get("frame"), "frame", 1),
             _num(b.get("x"), "x", -MAX_ANCHOR_M, MAX_ANCHOR_M),
             _num(b.get("y"), "y", -MAX_ANCHOR_M, MAX_ANCHOR_M),
             _num(b.get("th"), "th", -1e3, 1e3),
             own,
+            team,
         )
         if own and (a.x, a.y, a.theta) != (0.0, 0.0, 0.0):
             raise ProtocolError("field 'own': a withdrawn frame moves nothing (x, y, th 0)")
+        if own and team:
+            raise ProtocolError("fields 'own' and 'team': a withdrawal joins no team")
         return a
 
 

@@ -184,3 +184,34 @@ def test_priors_in_another_frame_or_for_keyframes_not_held_are_ignored():
     other.on_scan(0.0, room_scan(0.0))
     other.on_anchor(Anchor(1, 1.0, 0.0, 0.0))  # an anchor on its way: the frame changes
     assert other.on_priors(Priors(0, 0.05, 0.01, ((0, *moved),))) == 0
+
+
+def test_a_team_anchor_moves_the_robot_into_a_frame_that_is_not_the_shared_one():
+    """A ``team`` anchor moves the robot like any (its map and pose follow) but its
+    coordinates stay out of the shared frame: no merged map, no peers, poses that say
+    ``own``. The team's anchor in the shared frame then moves it there."""
+    from polyswarm.config import RobotEntry
+    from protocols.messages import Anchor
+
+    cfg = replace(Config(), robots=(RobotEntry("r1"), RobotEntry("r2"), RobotEntry("r3")))
+    agent = RobotAgent("r3", cfg, (0.0, 0.0, 0.0), frame_known=False)
+    agent.on_odom(0.0, Odometry(0.0, 0.0, 0.0))
+    agent.on_scan(0.0, room_scan(0.0))
+    agent.on_anchor(Anchor(1, 2.0, -1.0, 0.5, team=True))
+    poses = []
+    for k in range(1, 8):
+        agent.on_odom(0.1 * k, Odometry(0.0, 0.0, 0.0))
+        out = agent.on_scan(0.1 * k, room_scan(0.1 * k))
+        poses += [out.pose] if out.pose is not None else []
+    assert agent.frame == 1 and agent.own_frame and not agent.in_shared_frame
+    assert np.allclose(agent.pose, [2.0, -1.0, 0.5], atol=1e-6)  # moved into r2's frame
+    assert np.allclose(agent.start_pose, [2.0, -1.0, 0.5], atol=1e-6)
+    assert poses and all(p.frame == 1 and p.own for p in poses)
+    agent.on_merged_map(agent.slam.map)
+    agent.on_peer_pose("r1", 0.9, Pose(1.0, 0.0, 0.0, frame=0))
+    assert agent.merged is None and agent.peers == {}
+    agent.on_anchor(Anchor(2, 1.0, 1.0, 0.0))  # the team placed in the shared frame
+    agent.on_odom(0.9, Odometry(0.0, 0.0, 0.0))
+    agent.on_scan(0.9, room_scan(0.9))
+    assert agent.frame == 2 and not agent.own_frame and agent.in_shared_frame
+    assert np.allclose(agent.pose, [3.0, 0.0, 0.5], atol=1e-6)

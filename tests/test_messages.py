@@ -257,6 +257,11 @@ def test_a_pose_names_its_frame_only_once_anchored():
     assert w.own and w.frame == 2
     with pytest.raises(ProtocolError):  # a withdrawal moves nothing
         decode(encode(Anchor(2, 1.0, 0.0, 0.0, own=True), "coordinator", 0, 0.0), Anchor)
+    _, t = decode(encode(Anchor(3, 2.0, -1.0, 0.5, team=True), "coordinator", 0, 0.0), Anchor)
+    assert t.team and not t.own and (t.frame, t.x, t.y, t.theta) == (3, 2.0, -1.0, 0.5)
+    assert "team" not in Anchor(1, 3.0, -4.0, 1.5).body()  # as older senders wrote it
+    with pytest.raises(ProtocolError):  # a withdrawal joins no team
+        decode(encode(Anchor(2, 0.0, 0.0, 0.0, True, True), "coordinator", 0, 0.0), Anchor)
 
 
 def test_priors_travel_whole_and_bad_ones_are_refused():
