@@ -45,6 +45,15 @@ Until the coordinator knows where that frame lies in the shared map frame:
   again) and waits, explores and is matched as before. Its sightings are kept: they
   rule the withdrawn frame out of the next matches.
 
+Robots that wait form teams. Every ``MATCH_PERIOD_S`` a waiting team's map is also
+matched with the map of a waiting team whose lead's id sorts first, by the same rules
+(successive agreeing matches, the robots seen where the frame puts them, drawn to meet
+while a candidate stands). Once committed, the team's robots are sent a ``team`` anchor:
+they move into the other team's frame and its coordinator plans for them all (two waiting
+robots 11 m apart in the same corridor of the loop both drove down it for 120 s, loop
+seed 0). A team is matched with the merged map as one map, and placed as one: each of its
+robots is anchored to the same frame and handed over on its own.
+
 ``POLYSWARM_WRONG_ANCHOR=r2:dx,dy,deg`` (``polyswarm launch --wrong-anchor``) commits
 robot r2's first frame that far off (metres, metres, degrees, in the frame's own axes):
 a fault injection that shows a wrong merge undone.
@@ -131,15 +140,33 @@ def wrong_anchor_fault(text: str) -> tuple[str, np.ndarray] | None:
 
 
 @dataclass
-class _Waiting:
-    """A robot exploring alone, and how far finding its frame has got."""
+class _Pairing:
+    """A waiting team's frame in another waiting team's, and how far finding it has got."""
 
-    solo: object  # agents.coordinator.Coordinator, for this robot alone
     frames: FrameEstimate = field(default_factory=FrameEstimate)
     last_match_s: float = -math.inf
     matching: Future | None = None
     matches: int = 0
     seen_at_candidate: int = 0  # places the robots were seen at the candidate frame
+
+
+@dataclass
+class _Waiting:
+    """A robot exploring without the swarm (alone, or in a team of waiting robots), and
+    how far finding its frame in the shared one has got."""
+
+    # agents.coordinator.Coordinator of its team: of this robot alone, or, once it joined
+    # a team, the team's (shared by the team's robots)
+    solo: object
+    frames: FrameEstimate = field(default_factory=FrameEstimate)  # in the shared frame
+    last_match_s: float = -math.inf
+    matching: Future | None = None
+    matches: int = 0
+    seen_at_candidate: int = 0  # places the robots were seen at the candidate frame
+    # a team's member: the robot whose frame it speaks in (None: its own; it leads its team)
+    lead: str | None = None
+    teams: dict[str, _Pairing] = field(default_factory=dict)  # lead -> its frame in theirs
+    join: str | None = None  # the team its ``team`` anchor (sent, not yet named) joins
     anchor: Anchor | None = None  # sent, not yet named by the robot's poses
     anchor_sent_s: float = -math.inf
     # the anchor its poses name while it waits: 0 (its start's frame), or the ``own``
@@ -192,6 +219,7 @@ class Anchoring:
         from agents.coordinator import Coordinator
 
         solo = Coordinator(self.cfg, {rid: tuple(float(v) for v in start)})
+        solo.own_maps = True  # its robots are not in the shared frame: no merged map
         # target ids of its own: the main coordinator's must not repeat one it reached
         self._solos += 1
         solo._next_id = (solo._next_id + SOLO_ID_OFFSET * self._solos) % 1_000_000_000
@@ -203,7 +231,17 @@ class Anchoring:
         return main if w is None else w.solo
 
     def coordinators(self) -> list:
-        return [w.solo for w in self.waiting.values()]
+        """The waiting teams' coordinators (a team's robots share one)."""
+        return list({id(w.solo): w.solo for w in self.waiting.values()}.values())
+
+    def members(self, lead: str) -> list[str]:
+        """The robots of ``lead``'s team: it first, then those that joined it."""
+        return [lead, *sorted(r for r, w in self.waiting.items() if w.lead == lead)]
+
+    def _team_map(self, lead: str):
+        """The map of ``lead``'s team, in its frame: its own, or its team's merged map."""
+        solo = self.waiting[lead].solo
+        return solo.robots[lead].map if len(solo.robots) == 1 else solo.merged
 
     def close(self) -> None:
         for pool in (self._pool, self._audit_pool):
@@ -217,10 +255,10 @@ class Anchoring:
         to send."""
         out = self._audit(main, now_s)
         main.rendezvous = {}  # the swarm's robots drawn to waiting ones (``_rendezvous``)
-        for rid, w in self.waiting.items():
-            if w.matching is not None and w.matching.done():
-                self._took(rid, w, w.matching)
-                w.matching = None
+        for solo in self.coordinators():
+            solo.rendezvous, solo.tour_first = {}, set()
+        for rid, w in list(self.waiting.items()):
+            self._take(rid, w)
             if w.release is not None and now_s - w.anchor_sent_s >= RESEND_S:
                 w.anchor_sent_s = now_s  # the withdrawal, until its poses name it
                 out.append((rid, w.release))
@@ -229,30 +267,108 @@ class Anchoring:
                     w.anchor_sent_s = now_s
                     out.append((rid, w.anchor))
                 continue
-            if w.frames.pose is not None:  # committed: anchor it
-                w.solo.rendezvous = {}
-                x, y, th = (float(v) for v in self._committed(rid, w.frames.pose))
-                w.anchor, w.anchor_sent_s = Anchor(w.frame + 1, x, y, th), now_s
-                log.info(
-                    "robot %s anchored at (%.2f m, %.2f m, %.1f deg)", rid, x, y, math.degrees(th)
-                )
-                out.append((rid, w.anchor))
+            if w.lead is not None or self._busy(rid):
+                continue  # a team's member (its lead is matched), or a team on the move
+            if w.frames.pose is not None and not self._joined_by(rid):  # committed
+                out += self._place(rid, w.frames.pose, now_s)
                 continue
-            own = w.solo.robots[rid].map
+            peer = next((p for p, t in w.teams.items() if t.frames.pose is not None), None)
+            if peer is not None and self._leads(peer) and not self._busy(peer):
+                out += self._place(rid, w.teams[peer].frames.pose, now_s, peer)
+                continue
+            own = self._team_map(rid)
+            big = own is not None and own.explored_area() >= MIN_MAP_M2
             if (
-                w.matching is None
+                big
+                and w.matching is None
                 and now_s - w.last_match_s >= MATCH_PERIOD_S
-                and own is not None
-                and own.explored_area() >= MIN_MAP_M2
                 and main.merged.explored_area() >= MIN_MAP_M2
             ):
                 w.last_match_s = now_s
-                where, seen_at, tracks = self._evidence(rid, main)
+                theirs = {o: (self.tracks.get(o), info) for o, info in main.robots.items()}
+                where, seen_at, tracks = self._evidence(rid, theirs, main.merged)
                 w.matching = self._pool.submit(
                     _match, main.merged, own, where, seen_at, w.frames.candidate, tracks
                 )
+            if big:
+                self._match_teams(rid, w, now_s)
             self._rendezvous(rid, w, main)
         return out
+
+    def _leads(self, rid: str) -> bool:
+        w = self.waiting.get(rid)
+        return w is not None and w.lead is None
+
+    def _busy(self, lead: str) -> bool:
+        """Some robot of ``lead``'s team has an anchor on its way."""
+        return any(self.waiting[m].anchor is not None for m in self.members(lead))
+
+    def _joined_by(self, lead: str) -> bool:
+        """Robots are on their way into ``lead``'s team (their ``team`` anchors sent): the
+        team is placed once they are in."""
+        return any(w.join == lead for w in self.waiting.values())
+
+    def _place(self, lead: str, pose, now_s: float, team: str | None = None) -> list:
+        """Anchor every robot of ``lead``'s team at ``pose``: the frame of its team in the
+        shared one, or (``team``) in that team's frame."""
+        x, y, th = (float(v) for v in (self._committed(lead, pose) if team is None else pose))
+        robots = self.members(lead)
+        log.info(
+            "robot%s %s anchored at (%.2f m, %.2f m, %.1f deg)%s",
+            "s" if len(robots) > 1 else "",
+            ", ".join(robots),
+            x,
+            y,
+            math.degrees(th),
+            f" in the frame of {team}'s team" if team else "",
+        )
+        out = []
+        for rid in robots:
+            w = self.waiting[rid]
+            w.anchor = Anchor(w.frame + 1, x, y, th, team=team is not None)
+            w.anchor_sent_s, w.join = now_s, team
+            out.append((rid, w.anchor))
+        return out
+
+    def _match_teams(self, rid: str, w: _Waiting, now_s: float) -> None:
+        """Start a match of ``rid``'s team's map with the map of a waiting team whose lead
+        sorts before it (the one matched least lately), when due."""
+        if any(p.matching is not None for p in w.teams.values()):
+            return
+        due = []
+        for lead in self.waiting:
+            if lead >= rid or not self._leads(lead) or self._busy(lead):
+                continue
+            p = w.teams.setdefault(lead, _Pairing())
+            theirs = self._team_map(lead)
+            if (
+                now_s - p.last_match_s >= MATCH_PERIOD_S
+                and theirs is not None
+                and theirs.explored_area() >= MIN_MAP_M2
+            ):
+                due.append((p.last_match_s, lead, theirs))
+        if not due:
+            return
+        _, lead, theirs = min(due, key=lambda d: d[:2])
+        p = w.teams[lead]
+        p.last_match_s = now_s
+        solo = self.waiting[lead].solo
+        team = {o: (self.tracks.get(o), solo.robots[o]) for o in self.members(lead)}
+        where, seen_at, tracks = self._evidence(rid, team, theirs)
+        own = self._team_map(rid)
+        p.matching = self._pool.submit(
+            _match, theirs, own, where, seen_at, p.frames.candidate, tracks
+        )
+
+    def _take(self, rid: str, w: _Waiting) -> None:
+        """Take ``rid``'s finished matches: with the merged map, and with other teams'."""
+        if w.matching is not None and w.matching.done():
+            self._took(rid, w, w.matching, "the merged map")
+            w.matching = None
+        for lead, p in w.teams.items():
+            if p.matching is not None and p.matching.done():
+                self._took(rid, p, p.matching, f"the map of {lead}'s team")
+                p.matching = None
 
     def _committed(self, rid: str, pose: np.ndarray) -> np.ndarray:
         """The frame sent for a committed ``pose``: the pose, or, for the robot of a
@@ -379,29 +495,36 @@ class Anchoring:
         robot of the swarm (in its own frame): if the frame is right they see each other
         there and the frame is committed; if not, the robot finds the place empty (or a
         wall), the sightings contradict the frame and the next match leaves it out.
+        Without a candidate in the shared frame, a candidate in another waiting team's
+        frame draws it to that team's nearest robot.
 
-        Once the swarm has no frontier left, its robot nearest to where the frame puts
-        the waiting one tours standpoints in sight of it too: a robot standing still is
-        seen in one place however the other tours (rooms at unknown starts, seed 3: two
-        right frames seen in 1 and 2 places for 120 s, never merged)."""
+        Once the swarm (or that team) has no frontier left, its robot nearest to where the
+        frame puts the waiting one tours standpoints in sight of it too: a robot standing
+        still is seen in one place however the other tours (rooms at unknown starts, seed
+        3: two right frames seen in 1 and 2 places for 120 s, never merged)."""
         solo = w.solo
         me = solo.robots[rid].pose
-        frame = w.frames.candidate
-        others = [r for r in main.robots.values() if r.alive and r.pose is not None]
-        solo.rendezvous, solo.tour_first = {}, set()
+        there, frame, seen = main, w.frames.candidate, w.seen_at_candidate
+        for lead, p in w.teams.items():
+            if frame is None and p.frames.candidate is not None and self._leads(lead):
+                there, frame = self.waiting[lead].solo, p.frames.candidate
+                seen = p.seen_at_candidate
+        others = [r for r in there.robots.values() if r.alive and r.pose is not None]
         if frame is None or me is None or not others:
             return
-        if w.seen_at_candidate >= TOUR_FIRST_SEEN:
-            solo.tour_first = {rid}
-        there = transform_points(inverse(frame), np.array([r.pose[:2] for r in others]))
-        k = int(np.argmin(np.hypot(*(there - me[:2]).T)))
+        if seen >= TOUR_FIRST_SEEN:
+            solo.tour_first.add(rid)
+        at = transform_points(inverse(frame), np.array([r.pose[:2] for r in others]))
+        k = int(np.argmin(np.hypot(*(at - me[:2]).T)))
         heading = compose(inverse(frame), others[k].pose)[2]  # its lidar looks this way
-        solo.rendezvous[rid] = (float(there[k][0]), float(there[k][1]), float(heading))
-        if main.out_of_frontiers and others[k].id not in main.rendezvous:
-            x, y, th = (float(v) for v in compose(frame, me))  # the waiting one, shared frame
-            main.rendezvous[others[k].id] = (x, y, th)
+        solo.rendezvous[rid] = (float(at[k][0]), float(at[k][1]), float(heading))
+        if there.out_of_frontiers and others[k].id not in there.rendezvous:
+            x, y, th = (float(v) for v in compose(frame, me))  # the waiting one, their frame
+            there.rendezvous[others[k].id] = (x, y, th)
 
-    def _took(self, rid: str, w: _Waiting, done: Future) -> None:
+    def _took(self, rid: str, w: _Waiting | _Pairing, done: Future, against: str) -> None:
+        """A finished match of ``rid``'s team's map ``against`` a map (the merged map,
+        ``w`` its ``_Waiting``, or another team's, ``w`` that ``_Pairing``)."""
         try:
             got: _Matched = done.result()
         except Exception:  # a failed match must not stop the coordinator: logged, retried
@@ -433,15 +556,16 @@ class Anchoring:
         if m.proposed:  # the candidate is this match's pose now
             w.seen_at_candidate = got.seen
         log.info(
-            "map of %s against the merged map (match %d): %s, seen %d time(s)%s",
+            "map of %s against %s (match %d): %s, seen %d time(s)%s",
             rid,
+            against,
             w.matches,
             m.summary(),
             got.seen,
             "" if m.accepted else " (refused)",
         )
         if before is None and w.frames.pose is not None:
-            log.info("frame of %s committed after %d matches", rid, w.matches)
+            log.info("frame of %s committed after %d matches with %s", rid, w.matches, against)
 
     def sighted(self, rid: str, stamp_s: float, pose: Pose) -> None:
         """A robot's pose, and its scan's clear profile if sent, for the tracks."""
@@ -453,31 +577,28 @@ class Anchoring:
         track = self.tracks.setdefault(rid, Track())
         track.add(Sighting(stamp_s, (pose.x, pose.y, pose.theta), pose.clear))
 
-    def _evidence(self, rid: str, main):
-        """Two tests of a frame of ``rid`` (its frame in the shared one) on copies of the
-        sightings so far, for the matching thread: the moments that contradict it
-        (``_contradicted_where``), and how often the robots saw each other where it puts
-        them (None, None without sightings); and the copies of the tracks (the swarm's
-        robots' in the shared frame, ``rid``'s in its own or None) whose paths the match
-        spares walls along (``_match``). A robot's
-        poses from before its latest large correction are left out (they were sent from
-        a frame that far off its map now)."""
+    def _evidence(self, rid: str, theirs: dict, merged):
+        """Two tests of a frame of ``rid``'s team in the frame of ``merged`` (the merged
+        map, or another team's) on copies of the sightings so far, for the matching
+        thread: the moments that contradict it (``_contradicted_where``), and how often
+        the robots saw each other where it puts them (None, None without sightings); and
+        the copies of the tracks (the other robots' in ``merged``'s frame, ``rid``'s in its
+        own or None) whose paths the match spares walls along (``_match``). ``theirs``:
+        robot -> (its track or None, its ``RobotInfo``), the robots of ``merged``. A
+        robot's poses from before its latest large correction are left out (they were
+        sent from a frame that far off its map now)."""
         mine = self.tracks.get(rid)
-        theirs = {
-            o: self.tracks[o].since(info.corrected_s)
-            for o, info in main.robots.items()
-            if o in self.tracks
-        }
+        theirs = {o: t.since(info.corrected_s) for o, (t, info) in theirs.items() if t}
         if mine is not None:
             mine = mine.since(self.waiting[rid].solo.robots[rid].corrected_s)
         tracks = (list(theirs.values()), mine)
         if mine is None or not theirs:
             return None, None, tracks
-        maps = (main.merged, self.waiting[rid].solo.robots[rid].map)
+        maps = (merged, self._team_map(rid))
         where = _contradicted_where(theirs, mine, maps)
 
         def seen_at(frame: np.ndarray) -> int:
-            """Places in the shared frame, all robots' sightings."""
+            """Places in ``merged``'s frame, all robots' sightings."""
             places = [mutual_seen(t, mine, frame, maps) for t in theirs.values()]
             return distinct_places(np.vstack(places))
 
@@ -501,9 +622,16 @@ class Anchoring:
         copy = w.solo.robots[rid].map
         if copy is None or copy.version < map_version:
             return False  # the correction is still on its way: the next pose tries again
+        if w.anchor is not None and w.anchor.team:
+            self._into_team(rid, w)
+            return False
         from agents.coordinator import RobotInfo
 
         del self.waiting[rid]
+        # its copy and state; its team's other robots go on waiting with the coordinator
+        solo = w.solo.robots[rid]
+        if len(w.solo.robots) > 1:
+            w.solo.withdraw(rid, "placed in the shared frame")
         if w.anchor is None:  # anchored by this coordinator before it restarted
             log.info("robot %s is in the shared frame already (anchor %d)", rid, frame)
             pose = np.zeros(3)  # its start in the shared frame is not known here
@@ -514,7 +642,6 @@ class Anchoring:
         self.anchored[rid] = pose
         if rid in self.tracks:  # its poses so far, in the shared frame
             self.tracks[rid] = self.tracks[rid].moved(pose)
-        solo = w.solo.robots[rid]
         info = main.robots[rid] = RobotInfo(rid, compose(pose, solo.start))  # its start
         info.alive = solo.alive
         info.epoch = w.epoch + 1  # results of its earlier stay in the merged map are stale
@@ -522,6 +649,34 @@ class Anchoring:
             main.on_robot_map(rid, solo.map, solo.atlas)
         log.info("robot %s joins the swarm's map (%d matches)", rid, w.matches)
         return True
+
+    def _into_team(self, rid: str, w: _Waiting) -> None:
+        """``rid`` names its ``team`` anchor and its copy caught up (in the team's frame
+        now): its team's coordinator takes it over, with its map and its track."""
+        from agents.coordinator import RobotInfo
+
+        a, lead = w.anchor, w.join
+        pose = np.array([a.x, a.y, a.theta])
+        mine = w.solo.robots[rid]
+        start = compose(pose, mine.start)  # its start, in the team's frame
+        w.anchor, w.join, w.frame = None, None, a.frame
+        if rid in self.tracks:
+            self.tracks[rid] = self.tracks[rid].moved(pose)
+        team = self.waiting.get(lead)
+        if team is None or team.lead is not None:  # (held while robots join: not expected)
+            log.warning("robot %s: the team of %s is gone; it waits alone", rid, lead)
+            mine.start = start
+            return
+        if len(w.solo.robots) > 1:
+            w.solo.withdraw(rid, f"joins the team of {lead}")
+        info = team.solo.robots[rid] = RobotInfo(rid, start)
+        info.alive, info.pose, info.pose_t = mine.alive, None, mine.pose_t
+        if mine.map is not None:
+            team.solo.on_robot_map(rid, mine.map, mine.atlas)
+        w.solo, w.lead = team.solo, lead
+        w.frames, w.teams, w.matching = FrameEstimate(), {}, None  # in its old frame
+        w.seen_at_candidate = 0
+        log.info("robot %s joins the team of %s: %s", rid, lead, ", ".join(self.members(lead)))
 
 
 def _log_evidence(rid: str, rows, level: int) -> None:

@@ -254,6 +254,9 @@ class Coordinator:
         # ... and those of them whose candidate frame the robots were seen at: they tour
         # standpoints before their own frontiers (which the swarm has likely explored)
         self.tour_first: set[str] = set()
+        # its robots plan on their own maps, not on this one (a team of robots whose
+        # frames are not known yet, ``agents.anchoring``): goals only in a robot's own map
+        self.own_maps = False
         self.meetings = Meetings(cfg)  # their tours once no frontier is left
         self.out_of_frontiers = False  # the last cycle found no frontier a robot can reach
 
@@ -567,12 +570,12 @@ class Coordinator:
         self._check_behind(info)
         self._pending.setdefault(rid, set()).update(pmap.cells)
 
-    def withdraw(self, rid: str) -> RobotInfo:
+    def withdraw(self, rid: str, why: str = "") -> RobotInfo:
         """A robot leaves the swarm's map and plan (its frame was found wrong,
-        ``agents.anchoring``): the merged cells its copy reached are merged afresh from
-        the other robots' copies at the next flush, its target is free. Its copy, pose
-        and state are returned: nothing it mapped is lost, it goes on in a frame of its
-        own."""
+        ``agents.anchoring``; or, ``why``, it leaves a waiting team's coordinator): the
+        merged cells its copy reached are merged afresh from the other robots' copies at
+        the next flush, its target is free. Its copy, pose and state are returned: nothing
+        it mapped is lost, it goes on in a frame of its own (or another coordinator's)."""
         info = self.robots.pop(rid)
         self._pending.pop(rid, None)
         if info.map is not None:
@@ -580,7 +583,10 @@ class Coordinator:
         if self.pool is not None:  # its worker journals its copy aside (persist)
             self.pool.drop(rid)
         self._wake = True
-        log.warning("robot %s withdrawn from the merged map", rid)
+        if why:
+            log.info("robot %s leaves this coordinator: %s", rid, why)
+        else:
+            log.warning("robot %s withdrawn from the merged map", rid)
         return info
 
     def flush_due(self) -> bool:
@@ -781,6 +787,13 @@ class Coordinator:
                 for j, tid in enumerate(ids):
                     if r.excluded.get(tid, -math.inf) > self.now:
                         costs[k, j] = math.inf
+            if self.own_maps and len(live) > 1 and ids:
+                # a waiting team's robots plan on their own maps (``agents.anchoring``):
+                # each takes the team's frontiers whose goals lie in its own map
+                goals = np.array([targets[t].goal for t in ids]).reshape(-1, 2)
+                for k, r in enumerate(live):
+                    if r.map is not None:
+                        costs[k, ~r.map.is_free_many(goals)] = math.inf
             if self.state == MissionState.RETURNING and reachable.any():
                 log.info("new frontiers while returning: exploring again")
                 self.state = MissionState.EXPLORING

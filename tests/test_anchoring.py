@@ -534,3 +534,80 @@ def test_a_match_proposes_the_image_of_the_frame_the_robots_saw_each_other_at():
         verdict_at(best, truth.copy())  # a pose that is not one of the match's own
     unseen = _match(a, b, None, lambda pose: 0)  # nobody seen anywhere: the best, as before
     assert frame_error(unseen.match.pose, best.pose)[0] < 0.01 and unseen.seen == 0
+
+
+def test_two_waiting_robots_whose_maps_match_form_a_team_placed_as_one():
+    """r2 and r3 wait; r1's map is too small to match with, theirs overlap, and r2 saw r3
+    drive through three places where the truth puts it. r3 is sent a ``team`` anchor (its
+    frame in r2's); once its poses name it and its copy caught up, r2's coordinator plans
+    for both, each on frontiers of its own map. When the team's frame in the shared one
+    is committed, both robots are anchored at it and handed over one by one."""
+    import time
+
+    from shapely.geometry import box
+
+    from agents.anchoring import Anchoring
+    from agents.coordinator import Coordinator
+    from protocols.messages import Pose
+    from tests.test_mapmatch import _seen
+    from tests.test_sighting import profile_with_a_robot_at
+
+    truth2, truth3 = np.array([6.0, 1.0, 0.4]), np.array([12.0, 1.0, 2.1])  # building frame
+    rel = compose(inverse(truth2), truth3)  # r3's frame in r2's
+    cfg = Config()
+    main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
+    main.on_robot_map("r1", _seen(box(-1, -8, 1, 2)))  # 2 m2: no match with it yet
+    main.flush()
+    frames = Anchoring(cfg, ["r2", "r3"])
+    s2, s3 = frames.owner("r2", main), frames.owner("r3", main)
+    b2, b3 = _seen(box(3, -8, 16, 9), truth2), _seen(box(8, -8, 21, 9), truth3)
+    for rid, solo, b in (("r2", s2, b2), ("r3", s3, b3)):
+        solo.on_robot_map(rid, b)
+        solo.on_pose(rid, 0.0, Pose(0.0, 0.0, 0.0))
+        solo.on_alive(rid, True)
+    for k in range(7):  # r3 drives 1.8 m along x, then 1.8 m along -y, in r2's sight
+        there = truth3[:2] + 0.6 * np.array([min(k, 3), -max(k - 3, 0)])
+        seen = profile_with_a_robot_at(transform_points(inverse(truth2), there[None])[0])
+        frames.sighted("r2", float(k), Pose(0.0, 0.0, 0.0, clear=seen))
+        frames.sighted(
+            "r3", float(k), Pose(*transform_points(inverse(truth3), there[None])[0], 0.0)
+        )
+    sent, now, give_up = [], 10.0, time.monotonic() + 120.0
+    while not sent and time.monotonic() < give_up:
+        sent = frames.tick(main, now)
+        now += 1.0
+        time.sleep(0.02)
+    [(rid, anchor)] = sent
+    assert rid == "r3" and anchor.team and not anchor.own and anchor.frame == 1
+    got = np.array([anchor.x, anchor.y, anchor.theta])
+    assert np.hypot(*(got[:2] - rel[:2])) < 0.05 and abs(got[2] - rel[2]) < 0.01
+    assert frames.waiting["r3"].join == "r2" and frames.waiting["r2"].anchor is None
+    # r3 moves into r2's frame: its copy follows, then a pose (its own frame, 1) hands it over
+    moved = transform_map(b3, got)
+    moved = GridPolyMap(moved.cell_size, moved.cells, b3.version + 1)
+    assert not frames.on_pose("r3", 1, moved.version, main, own=True)  # copy behind
+    s3.on_robot_map("r3", moved)
+    assert not frames.on_pose("r3", 1, moved.version, main, own=True)  # not to the swarm
+    assert frames.owner("r3", main) is s2 and frames.members("r2") == ["r2", "r3"]
+    assert frames.coordinators() == [s2] and "r3" not in main.robots
+    s2.flush()
+    both = shapely.union(b2.explored_region(), moved.explored_region()).area
+    assert abs(s2.merged.explored_area() - both) < 0.01 * both
+    # the team's coordinator plans for both, each on a frontier of its own map (the
+    # frontiers west of x = 3 m are r2's, those east of x = 21 m r3's)
+    s2.on_pose("r3", now, Pose(*compose(got, np.zeros(3)), 0.0))
+    out = s2.cycle()
+    assert set(out.assignments) == {"r2", "r3"}
+    for r, own in (("r2", b2), ("r3", moved)):
+        assert own.is_free_many(np.array([out.assignments[r].goal]))[0]
+    # the team's frame in the shared one committed: both robots anchored at it
+    frames.waiting["r2"].frames.pose = truth2
+    placed = dict(frames.tick(main, now))
+    assert set(placed) == {"r2", "r3"} and placed["r3"].frame == 2 and placed["r2"].frame == 1
+    assert not placed["r3"].team and placed["r2"].x == placed["r3"].x == truth2[0]
+    there = transform_map(moved, truth2)
+    s2.on_robot_map("r3", GridPolyMap(there.cell_size, there.cells, moved.version + 1))
+    assert frames.on_pose("r3", 2, moved.version + 1, main)
+    assert np.allclose(main.robots["r3"].start, truth3, atol=0.05)
+    assert "r3" not in s2.robots and frames.owner("r2", main) is s2  # r2 still on its way
+    frames.close()

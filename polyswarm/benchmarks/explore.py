@@ -296,8 +296,10 @@ def summarise_unknown(rows: list[dict]) -> dict:
                 "wrong_sent": sum(
                     e["err_m"] > WRONG_FRAME_M or e["err_deg"] > WRONG_FRAME_DEG
                     for e in r.get("anchor_events", [])
-                    if not e["own"]
+                    if not e["own"] and not e.get("team")
                 ),
+                # waiting robots placed in each other's frames (``agents.anchoring``)
+                "teamed": sum(bool(e.get("team")) for e in r.get("anchor_events", [])),
                 "undone": sum(e["own"] for e in r.get("anchor_events", [])),
                 # the robots' poses in the shared frame against ground truth: the worst
                 # robot's median and 95th percentile (metres)

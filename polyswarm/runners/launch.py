@@ -285,6 +285,9 @@ class Observer:
         event = {"robot": rid, "frame": a.frame, "t_s": self.sim_t, "own": a.own}
         if a.own:  # withdrawn: its map left the merged map, its coordinates are its own
             self.anchors.pop(rid, None)
+        elif a.team:  # into another waiting robot's frame: scored once the team is placed
+            first = compose((a.x, a.y, a.theta), first)
+            event["team"] = True
         else:
             first = compose((a.x, a.y, a.theta), first)
             truth = compose(self.to_map, self.true_starts[k])
@@ -364,7 +367,9 @@ class Observer:
             if isinstance(msg, RobotStatus):
                 view.state, view.target = str(msg.state), msg.target
                 view.bytes_sent, view.keyframes = msg.bytes_sent, msg.keyframes
-            elif isinstance(msg, Pose) and (rid not in self.own_frames or msg.frame > 0):
+            elif isinstance(msg, Pose) and (
+                rid not in self.own_frames or (msg.frame > 0 and not msg.own)
+            ):
                 view.estimate.append((item.stamp_s, msg.x, msg.y, msg.theta))
             elif isinstance(msg, MapChunk) and item.payload is not None:
                 view.map_delta_bytes += len(item.payload)
