@@ -676,6 +676,18 @@ def run_agent(
                 detach()
             agent.stats.refused += bus.rejected  # refused by the decoders on arrival
             bus.close()
+            st = agent.stats
+            log.info(
+                "%s: %d scans, %d keyframes, %.1f m driven; returns kept from SLAM as other "
+                "robots' %d, left out of ICP as blobs %d; messages refused %d",
+                robot_id,
+                st.scans,
+                st.keyframes,
+                st.distance_m,
+                st.peer_returns_masked,
+                agent.slam.blob_returns_skipped,
+                st.refused,
+            )
             if state_dir:  # the map is on disk already (snapshot and journal): the pose
                 persist.save_pose(
                     state_dir,
