@@ -332,12 +332,16 @@ class Anchoring:
 
     def _match_teams(self, rid: str, w: _Waiting, now_s: float) -> None:
         """Start a match of ``rid``'s team's map with the map of a waiting team whose lead
-        sorts before it (the one matched least lately), when due."""
-        if any(p.matching is not None for p in w.teams.values()):
+        sorts before it (the one matched least lately), when due. Not while either has a
+        candidate frame in the shared one: it is on its way to the swarm (and the matching
+        thread is shared)."""
+        if w.frames.candidate is not None or any(p.matching for p in w.teams.values()):
             return
         due = []
         for lead in self.waiting:
             if lead >= rid or not self._leads(lead) or self._busy(lead):
+                continue
+            if self.waiting[lead].frames.candidate is not None:
                 continue
             p = w.teams.setdefault(lead, _Pairing())
             theirs = self._team_map(lead)
@@ -449,7 +453,7 @@ class Anchoring:
             if o in self.tracks
         ]
         seen = mine is not None and len(mine) > 0 and bool(theirs)
-        where = _contradicted_where(theirs, mine, (main.merged, own)) if seen else None
+        where = _contradicted_where(theirs, {rid: mine}, (main.merged, own)) if seen else None
 
         def audit() -> tuple[list[tuple], float, float]:
             moments = where(np.zeros(3)) if where is not None else []
@@ -475,7 +479,7 @@ class Anchoring:
             len(a.evidence),
             a.conflicting,
         )
-        _log_evidence(rid, a.evidence, logging.WARNING)
+        _log_evidence(a.evidence, logging.WARNING)
         info = main.withdraw(rid)
         solo = self._solo(rid, info.start)  # its start, in the coordinates it speaks in
         mine = solo.robots[rid]
@@ -543,7 +547,7 @@ class Anchoring:
                 rid,
                 len(got.stale),
             )
-            _log_evidence(rid, got.stale, logging.INFO)
+            _log_evidence(got.stale, logging.INFO)
             w.frames.forget_candidate()
             w.seen_at_candidate = 0
         m = got.match
@@ -582,24 +586,32 @@ class Anchoring:
         map, or another team's) on copies of the sightings so far, for the matching
         thread: the moments that contradict it (``_contradicted_where``), and how often
         the robots saw each other where it puts them (None, None without sightings); and
-        the copies of the tracks (the other robots' in ``merged``'s frame, ``rid``'s in its
-        own or None) whose paths the match spares walls along (``_match``). ``theirs``:
-        robot -> (its track or None, its ``RobotInfo``), the robots of ``merged``. A
-        robot's poses from before its latest large correction are left out (they were
-        sent from a frame that far off its map now)."""
-        mine = self.tracks.get(rid)
+        the copies of the tracks (the other robots' in ``merged``'s frame, those of
+        ``rid``'s team in its frame) whose paths the match spares walls along
+        (``_match``). ``theirs``: robot -> (its track or None, its ``RobotInfo``), the
+        robots of ``merged``. Every robot of the team looks for the others and is looked
+        for (office seed 3: a team's lead was seen in 2 places of 3 for 60 s while its
+        other robot's sightings went unused). A robot's poses from before its latest
+        large correction are left out (they were sent from a frame that far off its map
+        now)."""
+        solo = self.waiting[rid].solo
+        mine = {
+            m: self.tracks[m].since(solo.robots[m].corrected_s)
+            for m in self.members(rid)
+            if m in self.tracks and m in solo.robots
+        }
         theirs = {o: t.since(info.corrected_s) for o, (t, info) in theirs.items() if t}
-        if mine is not None:
-            mine = mine.since(self.waiting[rid].solo.robots[rid].corrected_s)
-        tracks = (list(theirs.values()), mine)
-        if mine is None or not theirs:
+        tracks = (list(theirs.values()), list(mine.values()))
+        if not mine or not theirs:
             return None, None, tracks
         maps = (merged, self._team_map(rid))
         where = _contradicted_where(theirs, mine, maps)
 
         def seen_at(frame: np.ndarray) -> int:
             """Places in ``merged``'s frame, all robots' sightings."""
-            places = [mutual_seen(t, mine, frame, maps) for t in theirs.values()]
+            places = [
+                mutual_seen(t, u, frame, maps) for t in theirs.values() for u in mine.values()
+            ]
             return distinct_places(np.vstack(places))
 
         return where, seen_at, tracks
@@ -660,6 +672,8 @@ class Anchoring:
         mine = w.solo.robots[rid]
         start = compose(pose, mine.start)  # its start, in the team's frame
         w.anchor, w.join, w.frame = None, None, a.frame
+        w.frames, w.teams, w.matching = FrameEstimate(), {}, None  # of its old frame
+        w.seen_at_candidate = 0
         if rid in self.tracks:
             self.tracks[rid] = self.tracks[rid].moved(pose)
         team = self.waiting.get(lead)
@@ -674,16 +688,14 @@ class Anchoring:
         if mine.map is not None:
             team.solo.on_robot_map(rid, mine.map, mine.atlas)
         w.solo, w.lead = team.solo, lead
-        w.frames, w.teams, w.matching = FrameEstimate(), {}, None  # in its old frame
-        w.seen_at_candidate = 0
         log.info("robot %s joins the team of %s: %s", rid, lead, ", ".join(self.members(lead)))
 
 
-def _log_evidence(rid: str, rows, level: int) -> None:
-    """The first ``UNDO_EVIDENCE_LOGGED`` moments that contradict a frame of ``rid``
-    (``_Audit.evidence``'s rows): who looked from where, and where the frame put the other."""
-    for o, t, viewer, vx, vy, px, py in list(rows)[:UNDO_EVIDENCE_LOGGED]:
-        who, whom = (o, rid) if viewer == 0 else (rid, o)
+def _log_evidence(rows, level: int) -> None:
+    """The first ``UNDO_EVIDENCE_LOGGED`` moments that contradict a frame (``_Audit.evidence``'s
+    rows): who looked from where, and where the frame put the other."""
+    for o, m, t, viewer, vx, vy, px, py in list(rows)[:UNDO_EVIDENCE_LOGGED]:
+        who, whom = (o, m) if viewer == 0 else (m, o)
         log.log(
             level,
             "  at %.1f s %s at (%.2f, %.2f) saw clear where the frame put %s: "
@@ -699,11 +711,13 @@ def _log_evidence(rid: str, rows, level: int) -> None:
         )
 
 
-def _contradicted_where(theirs: dict[str, Track], mine: Track, maps):
-    """A function of a frame of ``mine``'s robot (in the frame of ``maps[0]``): the
-    moments the sightings contradict it (``polyswarm.sighting.contradicted_where``, over
-    the other robots' tracks ``theirs``, by robot), as ``_Audit.evidence``'s rows; their
-    number is what a match counts. Where the robots can stand in each map (``Room``) is
+def _contradicted_where(theirs: dict[str, Track], mine: dict[str, Track], maps):
+    """A function of the frame of ``mine``'s robots (their tracks by robot, in the frame
+    of ``maps[1]``) in the frame of ``maps[0]``: the moments the sightings contradict it
+    (``polyswarm.sighting.contradicted_where``, over every pair of one of the other
+    robots' tracks ``theirs`` and one of ``mine``), as ``_Audit.evidence``'s rows (the
+    other robot, the robot of ``mine``, then the row); their number is what a match
+    counts. Where the robots can stand in each map (``Room``) is
     built at the first call, in the thread that calls it."""
     rooms: list[Room] = []
 
@@ -711,9 +725,10 @@ def _contradicted_where(theirs: dict[str, Track], mine: Track, maps):
         if not rooms:
             rooms.extend([Room(maps[0]), Room(maps[1])])
         return [
-            (o, float(row[0]), int(row[1]), *(float(v) for v in row[2:]))
+            (o, m, float(row[0]), int(row[1]), *(float(v) for v in row[2:]))
             for o, t in theirs.items()
-            for row in contradicted_where(t, mine, frame, (rooms[0], rooms[1]))
+            for m, u in mine.items()
+            for row in contradicted_where(t, u, frame, (rooms[0], rooms[1]))
         ]
 
     return where
@@ -731,20 +746,20 @@ class _Matched:
     stale: tuple = ()
 
 
-def _match(merged, own, where, seen_at, candidate=None, tracks=((), None)) -> _Matched:
+def _match(merged, own, where, seen_at, candidate=None, tracks=((), ())) -> _Matched:
     """``match_maps`` of a robot's map on the merged map (its images unchecked: two more
     searches, three times the time, to tell what the sightings tell), and the places the
     robots saw each other at the pose it found (0 without sightings). ``where``: the
     moments the sightings contradict a frame (``_contradicted_where``; None without
     sightings). ``candidate``: the frame the robot is being sent to meet the others by,
     checked against the sightings. ``tracks``: the merged map's robots' tracks and the
-    waiting robot's (or None), whose paths spare walls (``match_maps``)."""
+    waiting team's, whose paths spare walls (``match_maps``)."""
     contradicts = None if where is None else (lambda f: len(where(f)) >= MIN_CONTRADICTIONS)
     stale = tuple(where(candidate)) if candidate is not None and where is not None else ()
     try:
         theirs, mine = tracks
         a_paths = [p for t in theirs for p in t.paths()]
-        b_paths = mine.paths() if mine is not None else []
+        b_paths = [p for t in mine for p in t.paths()]
         m = match_maps(merged, own, contradicts, images=False, a_paths=a_paths, b_paths=b_paths)
     except (MatchError, PolyswarmError) as e:
         return _Matched(None, str(e), stale=stale)

@@ -590,6 +590,11 @@ def test_two_waiting_robots_whose_maps_match_form_a_team_placed_as_one():
     assert not frames.on_pose("r3", 1, moved.version, main, own=True)  # not to the swarm
     assert frames.owner("r3", main) is s2 and frames.members("r2") == ["r2", "r3"]
     assert frames.coordinators() == [s2] and "r3" not in main.robots
+    # its sightings moved into r2's frame, and the team's evidence holds both robots'
+    first = frames.tracks["r3"].positions_at(np.array([0.0]))[0]
+    assert np.hypot(*(first - rel[:2])) < 0.05
+    _, _, (_, team_tracks) = frames._evidence("r2", {}, main.merged)
+    assert len(team_tracks) == 2
     s2.flush()
     both = shapely.union(b2.explored_region(), moved.explored_region()).area
     assert abs(s2.merged.explored_area() - both) < 0.01 * both
