@@ -269,11 +269,12 @@ class Anchoring:
                 continue
             if w.lead is not None or self._busy(rid):
                 continue  # a team's member (its lead is matched), or a team on the move
-            if w.frames.pose is not None and not self._joined_by(rid):  # committed
+            joining = self._joined_by(rid)  # robots on their way in: placed once they are
+            if w.frames.pose is not None and not joining:  # committed
                 out += self._place(rid, w.frames.pose, now_s)
                 continue
             peer = next((p for p, t in w.teams.items() if t.frames.pose is not None), None)
-            if peer is not None and self._leads(peer) and not self._busy(peer):
+            if peer is not None and not joining and self._leads(peer) and not self._busy(peer):
                 out += self._place(rid, w.teams[peer].frames.pose, now_s, peer)
                 continue
             own = self._team_map(rid)
