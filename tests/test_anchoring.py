@@ -482,8 +482,9 @@ def test_a_right_frame_is_held_against_maps_not_in_doubt_not_a_wrong_one_before_
 
 def test_a_restarted_coordinator_leaves_a_robot_whose_frame_was_withdrawn_waiting():
     """After a restart every robot without a start pose waits; one whose poses name an
-    anchor is taken as anchored, but not one whose poses say that anchor withdrew its
-    frame: it keeps waiting, and its poses count as sightings in its own frame."""
+    anchor is taken as anchored, but not one whose poses say ``own`` (that anchor withdrew
+    its frame, or put it in a team's frame, which the restarted coordinator does not
+    know): it keeps waiting alone, and its poses count as sightings in its own frame."""
     from shapely.geometry import box
 
     from agents.anchoring import Anchoring
