@@ -246,6 +246,10 @@ _DISC = np.array(
 )
 
 
+# the disc's offsets within a robot's footprint (``FOOTPRINT_M``)
+_IN_FOOTPRINT = np.hypot(_DISC[:, 0], _DISC[:, 1]) <= FOOTPRINT_M
+
+
 def unseen(
     viewer: Track, other: Track, frame, room: Room | None = None, other_room: Room | None = None
 ) -> int:
@@ -277,8 +281,8 @@ def unseen_where(
         return np.zeros(0), np.zeros((0, 3)), np.zeros((0, 2))
     t, poses, clear, p, d, bearing = pred
     if room is not None:
-        mine = None if other_room is None else (other_room, inverse(np.asarray(frame, float)))
-        hit = _unseen_in_room(poses, clear, p, room, mine)
+        other = None if other_room is None else (other_room, inverse(np.asarray(frame, float)))
+        hit = _unseen_in_room(poses, clear, p, room, other)
         return t[hit], poses[hit], p[hit]
     rows = np.arange(len(d))
     half = np.arcsin(NEAR_M / d)  # the disc's half-angle as the viewer sees it
@@ -323,8 +327,8 @@ def _unseen_in_room(
     pts = (p[:, None, :] + _DISC[None, :, :]).reshape(-1, 2)
     can = room.allows(pts)
     if other is not None:  # its body's footprint, where its own map lets it stand
-        body = np.tile(np.hypot(_DISC[:, 0], _DISC[:, 1]) <= FOOTPRINT_M, n)
-        can |= body & other[0].allows(transform_points(other[1], pts))
+        body = np.flatnonzero(np.tile(_IN_FOOTPRINT, n))
+        can[body] |= other[0].allows(transform_points(other[1], pts[body]))
     can = can.reshape(n, m)
     rel = pts.reshape(n, m, 2) - poses[:, None, :2]
     dist = np.hypot(rel[..., 0], rel[..., 1])
