@@ -151,18 +151,13 @@ class _Pairing:
 
 
 @dataclass
-class _Waiting:
+class _Waiting(_Pairing):
     """A robot exploring without the swarm (alone, or in a team of waiting robots), and
-    how far finding its frame in the shared one has got."""
+    how far finding its frame in the shared one has got (its ``_Pairing`` fields)."""
 
     # agents.coordinator.Coordinator of its team: of this robot alone, or, once it joined
     # a team, the team's (shared by the team's robots)
-    solo: object
-    frames: FrameEstimate = field(default_factory=FrameEstimate)  # in the shared frame
-    last_match_s: float = -math.inf
-    matching: Future | None = None
-    matches: int = 0
-    seen_at_candidate: int = 0  # places the robots were seen at the candidate frame
+    solo: object = None
     # a team's member: the robot whose frame it speaks in (None: its own; it leads its team)
     lead: str | None = None
     teams: dict[str, _Pairing] = field(default_factory=dict)  # lead -> its frame in theirs
@@ -200,7 +195,7 @@ class Anchoring:
         self.waiting = {}
         self._solos = 0  # solo coordinators made (their target ids must differ)
         for rid in unknown:
-            self.waiting[rid] = _Waiting(self._solo(rid, np.zeros(3)))
+            self.waiting[rid] = _Waiting(solo=self._solo(rid, np.zeros(3)))
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="mapmatch") if unknown else None
         # audits on a thread of their own: queued behind matches of a large map (94 s of
         # wall time each on the maze, beside the robots' processes on 2 cores), an undo
@@ -489,7 +484,7 @@ class Anchoring:
             solo.on_robot_map(rid, info.map, info.atlas)  # correction fetches the map)
         release = Anchor(a.frame + 1, 0.0, 0.0, 0.0, own=True)
         self.waiting[rid] = _Waiting(
-            solo, frame=release.frame, release=release, anchor_sent_s=now_s, epoch=info.epoch
+            solo=solo, frame=release.frame, release=release, anchor_sent_s=now_s, epoch=info.epoch
         )
         self.anchored.pop(rid, None)
         self.undone += 1
@@ -527,7 +522,7 @@ class Anchoring:
             x, y, th = (float(v) for v in compose(frame, me))  # the waiting one, their frame
             there.rendezvous[others[k].id] = (x, y, th)
 
-    def _took(self, rid: str, w: _Waiting | _Pairing, done: Future, against: str) -> None:
+    def _took(self, rid: str, w: _Pairing, done: Future, against: str) -> None:
         """A finished match of ``rid``'s team's map ``against`` a map (the merged map,
         ``w`` its ``_Waiting``, or another team's, ``w`` that ``_Pairing``)."""
         try:
@@ -638,7 +633,6 @@ class Anchoring:
         if w.anchor is not None and w.anchor.team:
             self._into_team(rid, w)
             return False
-        from agents.coordinator import RobotInfo
 
         del self.waiting[rid]
         # its copy and state; its team's other robots go on waiting with the coordinator
@@ -655,18 +649,15 @@ class Anchoring:
         self.anchored[rid] = pose
         if rid in self.tracks:  # its poses so far, in the shared frame
             self.tracks[rid] = self.tracks[rid].moved(pose)
-        info = main.robots[rid] = RobotInfo(rid, compose(pose, solo.start))  # its start
-        info.alive = solo.alive
+        # in the shared frame now (the anchor's correction moved its map), its start too
+        info = _take_over(main, rid, solo, compose(pose, solo.start))
         info.epoch = w.epoch + 1  # results of its earlier stay in the merged map are stale
-        if solo.map is not None:  # in the shared frame now: the anchor's correction moved it
-            main.on_robot_map(rid, solo.map, solo.atlas)
         log.info("robot %s joins the swarm's map (%d matches)", rid, w.matches)
         return True
 
     def _into_team(self, rid: str, w: _Waiting) -> None:
         """``rid`` names its ``team`` anchor and its copy caught up (in the team's frame
         now): its team's coordinator takes it over, with its map and its track."""
-        from agents.coordinator import RobotInfo
 
         a, lead = w.anchor, w.join
         pose = np.array([a.x, a.y, a.theta])
@@ -684,12 +675,21 @@ class Anchoring:
             return
         if len(w.solo.robots) > 1:
             w.solo.withdraw(rid, f"joins the team of {lead}")
-        info = team.solo.robots[rid] = RobotInfo(rid, start)
-        info.alive, info.pose, info.pose_t = mine.alive, None, mine.pose_t
-        if mine.map is not None:
-            team.solo.on_robot_map(rid, mine.map, mine.atlas)
+        _take_over(team.solo, rid, mine, start)
         w.solo, w.lead = team.solo, lead
         log.info("robot %s joins the team of %s: %s", rid, lead, ", ".join(self.members(lead)))
+
+
+def _take_over(coord, rid: str, was, start: np.ndarray):
+    """``coord`` takes ``rid`` over from another coordinator (``was``: its ``RobotInfo``
+    there, its map copy already in ``coord``'s frame) with its start there; the new info."""
+    from agents.coordinator import RobotInfo
+
+    info = coord.robots[rid] = RobotInfo(rid, start)
+    info.alive = was.alive
+    if was.map is not None:
+        coord.on_robot_map(rid, was.map, was.atlas)
+    return info
 
 
 def _log_evidence(rows, level: int) -> None:
