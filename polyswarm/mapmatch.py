@@ -446,7 +446,9 @@ def match_maps(
         return MapMatch(np.zeros(3), False, "no candidate pose", 0, 0, 0, 1, 0, 0)
     tree = wall_tree(va)
     refined, contradicted = [], 0
-    for _, pose in cands[:PEAKS]:  # not further: a weak peak is no candidate for its rivals
+    for _, pose in cands:
+        if len(refined) == PEAKS:  # not further: a weak peak is no candidate for its rivals
+            break
         if contradicts is not None and contradicts(pose):
             contradicted += 1
             continue
