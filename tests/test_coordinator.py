@@ -77,10 +77,24 @@ def test_greedy_discounts_targets_near_a_taken_one():
     assert out == [0, 2]
 
 
-def test_unreachable_targets_and_extra_robots_get_none():
-    costs = np.array([[INF, 2.0], [INF, 3.0], [INF, INF]])
-    assert assign(Strategy.HUNGARIAN, costs, [1.0, 1.0]) == [1, None, None]
+def test_robots_without_a_reachable_target_get_none():
+    costs = np.array([[INF, 2.0], [INF, INF]])
+    assert assign(Strategy.HUNGARIAN, costs, [1.0, 1.0]) == [1, None]
     assert assign(Strategy.HUNGARIAN, np.zeros((2, 0)), []) == [None, None]
+
+
+def test_robots_left_over_go_to_their_nearest_target():
+    # one target for three robots: robot 0 takes it, robot 1 follows (nearest, and only,
+    # target it reaches), robot 2 reaches nothing
+    costs = np.array([[INF, 2.0], [INF, 3.0], [INF, INF]])
+    assert assign(Strategy.HUNGARIAN, costs, [1.0, 1.0]) == [1, 1, None]
+    # two frontiers for three robots: the third goes to the one nearest to it, not to the
+    # one the assignment would have given a second robot for its utility
+    costs = np.array([[1.0, 9.0], [9.0, 1.0], [2.0, 8.0]])
+    assert assign(Strategy.HUNGARIAN, costs, [0.0, 20.0], groups=[0, 1]) == [0, 1, 0]
+    # a left-over robot keeps its current target unless another is clearly nearer
+    costs = np.array([[1.0, 9.0], [9.0, 1.0], [4.0, 4.5]])
+    assert assign(Strategy.HUNGARIAN, costs, [0.0, 0.0], [0, 1, 1], groups=[0, 1]) == [0, 1, 1]
 
 
 def test_hysteresis_keeps_the_current_target_unless_clearly_beaten():
@@ -113,16 +127,19 @@ def feed(c: Coordinator, rid: str, pmap: GridPolyMap, t: float) -> None:
     c.on_robot_delta(rid, t, decode_delta(encode_delta(delta)))
 
 
-def test_coordinator_sends_one_robot_to_the_frontier_and_ends_when_it_closes():
+def test_coordinator_sends_the_robots_to_the_frontier_and_ends_when_it_closes():
     c = coordinator(2)
     feed(c, "r1", corridor_map(open_end=True), 0.1)
     out = c.cycle()
     assert out.merged_delta is not None  # the robots' cells were merged
     assert c.state == MissionState.EXPLORING
-    kinds = {rid: a.kind for rid, a in out.assignments.items()}
-    # one frontier: one robot goes (the nearer one), the other waits
-    assert kinds == {"r2": AssignmentKind.EXPLORE}
-    goal = np.array(out.assignments["r2"].goal)
+    a = out.assignments
+    # one frontier: both go (the second robot follows, nearest to it; it does not wait)
+    assert {rid: x.kind for rid, x in a.items()} == dict.fromkeys(
+        ("r1", "r2"), AssignmentKind.EXPLORE
+    )
+    assert a["r1"].target == a["r2"].target
+    goal = np.array(a["r2"].goal)
     assert 9.0 < goal[0] < 12.0 and 0.0 < goal[1] < 2.0
     # r2 explores the end: the frontier becomes a wall, the mission ends and all go home
     closed = corridor_map(open_end=False)
@@ -159,12 +176,15 @@ def test_a_robot_that_leaves_frees_its_target_and_keeps_its_map():
     c = coordinator(2)
     feed(c, "r2", corridor_map(open_end=True), 0.1)
     c.cycle()
+    target = c.robots["r2"].assignment.target
     assert c.robots["r2"].assignment.kind == AssignmentKind.EXPLORE
     area = c.merged.explored_area()
     c.on_alive("r2", False)
     c.now = 2.0
     out = c.cycle()
-    assert set(out.assignments) == {"r1"}
+    assert "r2" not in out.assignments and c.robots["r2"].assignment is None
+    assert c.robots["r1"].assignment.kind == AssignmentKind.EXPLORE
+    assert c.robots["r1"].assignment.target == target
     assert c.merged.explored_area() == pytest.approx(area)  # nothing r2 mapped is lost
 
 
