@@ -9,6 +9,7 @@ import shapely
 from shapely.geometry import box
 
 from polyswarm.mapmatch import PEAKS, frame_error, match_maps, transform_map
+from polyswarm.mapsearch import search as coarse_to_fine
 from polyswarm.polymap import GridPolyMap
 from polyswarm.se2 import compose, inverse, transform_points
 from polyswarm.sighting import (
@@ -324,7 +325,34 @@ def test_a_pose_every_sighting_contradicts_is_never_accepted():
     assert (silent.accepted, silent.reason) == (plain.accepted, plain.reason)
     everything = match_maps(a_map, b_map, lambda f: True)
     assert not everything.accepted and "contradicted" in everything.reason
-    assert everything.contradicted == min(PEAKS, everything.candidates)
+    # past the best PEAKS peaks the search's next ones are tried, all of them here
+    assert everything.contradicted == everything.candidates > PEAKS
+
+
+def test_when_sightings_contradict_every_best_peak_the_next_peaks_are_refined():
+    """The search's best PEAKS peaks all contradicted (here: poses put in front of the
+    real ones): the next peaks are refined, and the true frame among them is found."""
+    a_map = GridPolyMap.from_polygons(
+        _typed(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
+    )
+    b_world = GridPolyMap.from_polygons(
+        _typed(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
+    )
+    to_b = np.array([3.0, 1.0, 0.7])
+    truth = inverse(to_b)
+    decoys = [(1e6, np.array([3.0 * k, 2.0, 0.5])) for k in range(PEAKS)]
+
+    def search(va, vb):
+        return decoys + coarse_to_fine(va, vb)
+
+    def contradicts(frame) -> bool:  # every pose but the truth
+        err_m, err_rad = frame_error(frame, truth)
+        return err_m > 1.0 or err_rad > math.radians(5.0)
+
+    m = match_maps(a_map, transform_map(b_world, to_b), contradicts, search=search)
+    assert m.contradicted >= PEAKS
+    err_m, err_rad = frame_error(m.pose, truth)
+    assert m.accepted and err_m < 0.1 and err_rad < math.radians(1.0), m.summary()
 
 
 def test_a_frame_is_refused_while_an_image_of_it_under_a_symmetry_of_a_map_is_possible():
