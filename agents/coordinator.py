@@ -83,6 +83,12 @@ RESYNC_AFTER_S = 1.0  # a robot's map ahead of ours this long: fetch it whole
 GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
 GOAL_RESET_M = 2.0  # ... and if this far, progress towards it is measured afresh
 STALLED_M = 1.0  # a robot that moved less than this while making no progress is stuck itself
+# a robot the assignment left over this long follows to its nearest target, taken by
+# another robot. At once, two robots often explored one office room (known starts, 5
+# seeds: t99 median 80 to 89 s), where a frontier of their own opens within 10-20 s; in
+# the maze at unknown starts two robots stood 100-120 s while a third explored the last
+# wing alone (parked robot-seconds before t99: examples/trajectory_speeds.py)
+FOLLOW_AFTER_S = 20.0
 # ... which is weak evidence against its target: it counts this much of a failure (not
 # nothing: three robots wedged in turn at the same narrow way retried it for 2,000 s)
 STALLED_WEIGHT = 0.5
@@ -156,6 +162,7 @@ class RobotInfo:
     # its poses sent before are that far off its map now (sightings forget them)
     corrected_s: float = -math.inf
     home_failed: bool = False  # could not drive back to its start (the mission still ends)
+    left_over_since: float | None = None  # the assignment has left it over (or it follows)
     # with a replay pool (``agents.replay``): the count of whole maps given to its worker
     # (results of updates sent before the last are dropped), its updates on the way, and
     # the newest version among them
@@ -935,7 +942,9 @@ class Coordinator:
                 goals,
                 self.cfg.explore.target_separation_m,
             ),
+            [self._follows(r) for r in live],
         )
+        self._note_left_over(live, choice)
         for k, (r, j) in enumerate(zip(live, choice, strict=True)):
             if j is None:
                 if r.assignment is not None and r.assignment.kind == AssignmentKind.EXPLORE:
@@ -963,6 +972,21 @@ class Coordinator:
                     float(costs[k, j]),
                     self.merged.version,
                 )
+
+    def _follows(self, r: RobotInfo) -> bool:
+        """Left over by the assignment for ``FOLLOW_AFTER_S``: it may follow another."""
+        return r.left_over_since is not None and self.now - r.left_over_since >= FOLLOW_AFTER_S
+
+    def _note_left_over(self, live, choice: list[int | None]) -> None:
+        """Since when each robot was left over by the assignment: a robot without a
+        target, or one sharing its target while it was left over (it follows), stays
+        so; one with a target of its own is not."""
+        shared = {j for j in choice if j is not None and choice.count(j) > 1}
+        for r, j in zip(live, choice, strict=True):
+            if j is None and r.left_over_since is None:
+                r.left_over_since = self.now
+            elif j is not None and j not in shared:
+                r.left_over_since = None
 
     def _drawn(self, costs: np.ndarray, goals: np.ndarray, live) -> np.ndarray:
         """Path costs (metres, robots x targets), plus for a robot with a ``rendezvous``

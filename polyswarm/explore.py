@@ -9,7 +9,7 @@ by ``polyswarm.targets``.)
   - ``hungarian``: optimal one-to-one assignment of robots to targets minimising
     ``cost - utility`` (scipy ``linear_sum_assignment``), one robot per group of
     targets (a frontier chain, or targets close together) before a second to any; a
-    robot left over goes to its nearest target;
+    robot left over waits, or (a ``follower``) goes to its nearest target;
   - ``greedy``: Burgard-style sequential cost-utility with utility discounted around
     targets already taken;
   - ``nearest``: the explore_lite-style baseline, every robot its own nearest target
@@ -179,15 +179,18 @@ def assign(
     goals: np.ndarray | None = None,
     separation_m: float = 3.0,
     groups: np.ndarray | list | None = None,
+    followers: list[bool] | None = None,
 ) -> list[int | None]:
-    """Target index per robot (None: nothing reachable).
+    """Target index per robot (None: nothing reachable, or left over and no follower).
 
     ``costs`` (robots x targets, metres, inf = unreachable), ``utilities`` (metres of
     frontier). ``current[r]`` is robot r's current target index in this list, whose
     path cost counts ``hysteresis`` times (so a robot switches only for a clearly
     better target). ``goals`` (targets x 2) are used by ``greedy`` to discount targets
     near one already taken. ``groups`` (per target) marks pieces of one frontier:
-    ``hungarian`` sends one robot per frontier before it sends a second to any."""
+    ``hungarian`` sends one robot per frontier before it sends a second to any.
+    ``followers[r]``: robot r, if ``hungarian`` leaves it over, goes to its nearest
+    target (taken by another robot) instead of getting none; every robot when None."""
     n_r, n_t = costs.shape
     if n_r == 0:
         return []
@@ -205,8 +208,10 @@ def assign(
     if strategy == Strategy.GREEDY:
         return _greedy(c, util, goals, separation_m)
     if groups is None:
-        return _spares_to_nearest(c, _hungarian(c, util))
-    return _spares_to_nearest(c, _hungarian_grouped(c, util, np.asarray(groups)))
+        out = _hungarian(c, util)
+    else:
+        out = _hungarian_grouped(c, util, np.asarray(groups))
+    return _followers_to_nearest(c, out, followers or [True] * n_r)
 
 
 def target_groups(chains, goals: np.ndarray, separation_m: float) -> np.ndarray:
@@ -273,15 +278,15 @@ def _hungarian(c: np.ndarray, util: np.ndarray) -> list[int | None]:
     return out
 
 
-def _spares_to_nearest(c: np.ndarray, out: list[int | None]) -> list[int | None]:
-    """More robots than targets: each robot left over goes to its nearest target (its
-    current one, by the hysteresis), as the reference planner's ``hungarian`` sends it.
-    Left standing, it waited while one robot explored a wing behind the last frontier
-    alone: maze launches at unknown starts, seed 4, two robots stood 100-120 s of the
-    last 120 s, after the rendezvous that merged them had brought all three together."""
+def _followers_to_nearest(
+    c: np.ndarray, out: list[int | None], followers: list[bool]
+) -> list[int | None]:
+    """More robots than targets: each follower left over goes to its nearest target (its
+    current one, by the hysteresis), as the reference planner's ``hungarian`` sends
+    every robot left over."""
     return [
-        int(np.argmin(row)) if t is None and np.isfinite(row).any() else t
-        for t, row in zip(out, c, strict=True)
+        int(np.argmin(row)) if t is None and f and np.isfinite(row).any() else t
+        for t, row, f in zip(out, c, followers, strict=True)
     ]
 
 

@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from agents.coordinator import END_CONFIRM_CYCLES, EXCLUDE_S, REACHED_GRACE_S, Coordinator
+from agents.coordinator import (
+    END_CONFIRM_CYCLES,
+    EXCLUDE_S,
+    FOLLOW_AFTER_S,
+    REACHED_GRACE_S,
+    Coordinator,
+)
 from polyswarm.config import Config
 from polyswarm.errors import DeltaGapError
 from polyswarm.explore import Strategy, assign
@@ -95,6 +101,9 @@ def test_robots_left_over_go_to_their_nearest_target():
     # a left-over robot keeps its current target unless another is clearly nearer
     costs = np.array([[1.0, 9.0], [9.0, 1.0], [4.0, 4.5]])
     assert assign(Strategy.HUNGARIAN, costs, [0.0, 0.0], [0, 1, 1], groups=[0, 1]) == [0, 1, 1]
+    # ... and only robots allowed to follow do
+    followers = [True, True, False]
+    assert assign(Strategy.HUNGARIAN, costs, [0.0, 0.0], followers=followers) == [0, 1, None]
 
 
 def test_hysteresis_keeps_the_current_target_unless_clearly_beaten():
@@ -127,19 +136,16 @@ def feed(c: Coordinator, rid: str, pmap: GridPolyMap, t: float) -> None:
     c.on_robot_delta(rid, t, decode_delta(encode_delta(delta)))
 
 
-def test_coordinator_sends_the_robots_to_the_frontier_and_ends_when_it_closes():
+def test_coordinator_sends_one_robot_to_the_frontier_and_ends_when_it_closes():
     c = coordinator(2)
     feed(c, "r1", corridor_map(open_end=True), 0.1)
     out = c.cycle()
     assert out.merged_delta is not None  # the robots' cells were merged
     assert c.state == MissionState.EXPLORING
-    a = out.assignments
-    # one frontier: both go (the second robot follows, nearest to it; it does not wait)
-    assert {rid: x.kind for rid, x in a.items()} == dict.fromkeys(
-        ("r1", "r2"), AssignmentKind.EXPLORE
-    )
-    assert a["r1"].target == a["r2"].target
-    goal = np.array(a["r2"].goal)
+    kinds = {rid: a.kind for rid, a in out.assignments.items()}
+    # one frontier: one robot goes (the nearer one), the other waits
+    assert kinds == {"r2": AssignmentKind.EXPLORE}
+    goal = np.array(out.assignments["r2"].goal)
     assert 9.0 < goal[0] < 12.0 and 0.0 < goal[1] < 2.0
     # r2 explores the end: the frontier becomes a wall, the mission ends and all go home
     closed = corridor_map(open_end=False)
@@ -172,19 +178,35 @@ def test_coordinator_sends_the_robots_to_the_frontier_and_ends_when_it_closes():
     assert out.status.cycle_cpu_ms == c.cycle_cpu_ms[-1]
 
 
+def test_a_robot_left_over_follows_another_after_a_while():
+    c = coordinator(2)
+    feed(c, "r1", corridor_map(open_end=True), 0.1)
+    c.cycle()
+    assert c.robots["r1"].assignment is None  # one frontier: r2 (nearer) goes, r1 waits
+    target = c.robots["r2"].assignment.target
+    t0 = c.now
+    c.now = t0 + FOLLOW_AFTER_S - 1.0
+    c.cycle()
+    assert c.robots["r1"].assignment is None
+    for dt in (FOLLOW_AFTER_S, FOLLOW_AFTER_S + 1.0):  # it follows, and keeps following
+        c.now = t0 + dt
+        c.on_pose("r2", c.now, Pose(2.0 + dt / 8.0, 1.0, 0.0))  # r2 drives on to the frontier
+        c.cycle()
+        a = c.robots["r1"].assignment
+        assert a.kind == AssignmentKind.EXPLORE and a.target == target
+    assert c.robots["r2"].assignment.target == target
+
+
 def test_a_robot_that_leaves_frees_its_target_and_keeps_its_map():
     c = coordinator(2)
     feed(c, "r2", corridor_map(open_end=True), 0.1)
     c.cycle()
-    target = c.robots["r2"].assignment.target
     assert c.robots["r2"].assignment.kind == AssignmentKind.EXPLORE
     area = c.merged.explored_area()
     c.on_alive("r2", False)
     c.now = 2.0
     out = c.cycle()
-    assert "r2" not in out.assignments and c.robots["r2"].assignment is None
-    assert c.robots["r1"].assignment.kind == AssignmentKind.EXPLORE
-    assert c.robots["r1"].assignment.target == target
+    assert set(out.assignments) == {"r1"}
     assert c.merged.explored_area() == pytest.approx(area)  # nothing r2 mapped is lost
 
 
