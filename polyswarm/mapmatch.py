@@ -12,7 +12,8 @@ the pose of map B's frame in map A's frame, or says why it cannot:
    Free space is what makes PolyMaps good at this: a wall seen through space the other
    robot drove through is evidence against a pose.
 2. *Refine.* The best peaks (``PEAKS``, apart by ``PEAK_APART_M``) are refined by
-   point-to-line ICP of B's wall points on A's walls.
+   point-to-line ICP of B's wall points on A's walls (the next ones too, while the
+   robots' sightings contradict every one so far).
 3. *Verify.* At the refined pose: the explored overlap, the length of wall both maps
    agree on, and the share of each map's walls standing in the other's clear space.
    A match is accepted only with enough overlap and agreeing wall, few conflicts, no
@@ -449,8 +450,8 @@ def match_maps(
     for k, (_, pose) in enumerate(cands):
         # the best PEAKS peaks (not further: a weak peak is no candidate for its rivals),
         # and past them only while the sightings contradicted every one: on the loop at
-        # unknown starts, seed 2, the top six were all contradicted in 7 matches in a row
-        # (35 s), and nothing was proposed until the true frame came up among them
+        # unknown starts, seed 2, the top six were all contradicted in 6 of 8 matches
+        # (40 s), and nothing was proposed until the true frame came up among them
         if k >= PEAKS and refined:
             break
         if contradicts is not None and contradicts(pose):
