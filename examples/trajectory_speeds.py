@@ -1,6 +1,7 @@
 """Where a run's robots spend their time, from their true trajectories.
 
     python examples/trajectory_speeds.py runs/bench-thesis/thesis-office-3-hungarian-0
+    python examples/trajectory_speeds.py --json RUN_FOLDERS   # time parked only, as JSON
 
 Shares of time standing, turning in place, driving below 80 % of the top speed seen
 (the 99th percentile) and at it; over all robots of the run folder(s). And each robot's
@@ -64,6 +65,9 @@ def parked_s(run: str) -> dict[str, float]:
 
 
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["--json"]:  # robot-seconds parked per run folder, for a result file
+        print(json.dumps({Path(r).name: parked_s(r) for r in sys.argv[2:]}, indent=1))
+        sys.exit()
     for run in sys.argv[1:]:
         top, s = shares(run)
         print(run, f"top {top:.2f} m/s", ", ".join(f"{k} {v:.0%}" for k, v in s.items()))
