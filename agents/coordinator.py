@@ -84,8 +84,8 @@ GOAL_MOVED_M = 0.5  # a kept target whose goal moved this far is sent again
 GOAL_RESET_M = 2.0  # ... and if this far, progress towards it is measured afresh
 STALLED_M = 1.0  # a robot that moved less than this while making no progress is stuck itself
 # a robot the assignment left over this long follows to its nearest target, taken by
-# another robot. At once, two robots often explored one office room (known starts, 5
-# seeds: t99 median 80 to 89 s), where a frontier of their own opens within 10-20 s; in
+# another robot. Following at once made the office slower (known starts, 5 seeds side
+# by side: t99 median 80 to 89 s), where robots left over were parked 10-20 s; in
 # the maze at unknown starts two robots stood 100-120 s while a third explored the last
 # wing alone (parked robot-seconds before t99: examples/trajectory_speeds.py)
 FOLLOW_AFTER_S = 20.0
