@@ -43,6 +43,7 @@ import shapely
 
 from polyswarm.errors import PolyswarmError
 from polyswarm.polymap import GridPolyMap, MergeOptions, Ring, TypedPolygon, VectorType
+from polyswarm.polymap.rings import OBSTACLE
 
 BAND_SHARE = 0.8  # of min_growth_m: a sliver thinner than min_growth_m is not merged
 SAMPLE_SHARE = 1.0  # chords are checked at points this share of the band apart
@@ -79,8 +80,8 @@ class _Zone:
                     self.cells[(i, j)] = c
         self.cell_size = s
         self._explored_keys = np.array([i * (1 << 32) + j for i, j in self.cells], np.int64)
-        obst = [c.vectors_of_type(VectorType.OBSTACLE) for c in self.cells.values()]
-        front = [c.vectors_of_type(VectorType.FRONTIER) for c in self.cells.values()]
+        obst = [c.obstacle_vectors for c in self.cells.values()]
+        front = [c.frontier_vectors for c in self.cells.values()]
         self.obstacles = _lines(obst)
         self.frontiers = _lines(front)
         self.step = max(SAMPLE_SHARE * self.band, MIN_SAMPLE_M)
@@ -167,7 +168,7 @@ def trim_keyframe(polygon: TypedPolygon, pmap: GridPolyMap, options: MergeOption
 def _trim_ring(ring: Ring, zone: _Zone) -> Ring:
     xy, ty = ring.xy, ring.types
     n = len(xy)
-    is_obst = ty == VectorType.OBSTACLE
+    is_obst = ty == OBSTACLE
     # a vertex may go when it and the vectors on both of its sides lie in the zone
     around_obst = is_obst | np.roll(is_obst, 1)
     droppable = zone.allows(xy, obstacle=False)

@@ -191,3 +191,18 @@ def test_a_scan_beside_a_pillar_never_trims_it_away(px, py, rx, ry, seed):
     # polygon where the merge of the whole dropped it as a sliver (6e-5 m2, example below)
     own = shapely.intersection(kf.to_shapely(), core).area
     assert trimmed <= max(whole, own) + 1e-6  # (snapped to the map's grid on merging)
+
+
+def test_a_cells_frontier_and_obstacle_views_are_its_vectors_of_each_type():
+    # a 4 x 3 m room with one open side (x = 4) on 2 m cells: the cell at (1, 0) holds
+    # 2 m of the open side as frontier and 2 m of bottom wall as obstacle
+    pmap = _room(types=(O, F, O, O))
+    c = pmap.cells[(1, 0)]
+    for kind, view in ((O, c.obstacle_vectors), (F, c.frontier_vectors)):
+        s, e = c.vectors_of_type(kind)
+        assert np.array_equal(view[0], s) and np.array_equal(view[1], e)
+    fs, fe = c.frontier_vectors
+    assert np.allclose(fs[:, 0], 4.0) and np.allclose(fe[:, 0], 4.0)
+    assert abs(float(np.hypot(*(fe - fs).T).sum()) - 2.0) < 1e-9
+    os_, oe = c.obstacle_vectors
+    assert abs(float(np.hypot(*(oe - os_).T).sum()) - 2.0) < 1e-9

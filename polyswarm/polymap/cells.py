@@ -9,7 +9,14 @@ import numpy as np
 import shapely
 
 from polyswarm.polymap.regions import _build_regions
-from polyswarm.polymap.rings import CellIndex, TypedPolygon, VectorType, _lines, _readonly
+from polyswarm.polymap.rings import (
+    SECTOR,
+    CellIndex,
+    TypedPolygon,
+    VectorType,
+    _lines,
+    _readonly,
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,13 +58,19 @@ class Cell:
             return False
         ring = self.polygons[0].shell
         return bool(
-            (ring.types == VectorType.SECTOR).all()
+            (ring.types == SECTOR).all()
             and abs(ring.signed_area - self.size * self.size) <= 1e-9 * self.size * self.size
         )
 
     @cached_property
     def obstacle_vectors(self) -> tuple[np.ndarray, np.ndarray]:
         return self.vectors_of_type(VectorType.OBSTACLE)
+
+    @cached_property
+    def frontier_vectors(self) -> tuple[np.ndarray, np.ndarray]:
+        """(starts, ends) of the frontier vectors (kept: trimming asks every cell a
+        keyframe reaches, and most cells are the same from one keyframe to the next)."""
+        return self.vectors_of_type(VectorType.FRONTIER)
 
     @cached_property
     def vectors(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -72,7 +85,7 @@ class Cell:
 
     def vectors_of_type(self, kind: VectorType) -> tuple[np.ndarray, np.ndarray]:
         s, e, t = self.vectors
-        m = t == kind
+        m = t == int(kind)
         return s[m], e[m]
 
     def wall_zone(self, width_m: float) -> shapely.Geometry:

@@ -20,11 +20,11 @@ from polyswarm.polymap.regions import _clean, _clip_to_cells, _union_snapped
 from polyswarm.polymap.rings import (
     _EMPTY,
     MATCH_TOL_M,
+    OBSTACLE,
     PRECISION_M,
     SLIVER_M,
     CellIndex,
     TypedPolygon,
-    VectorType,
 )
 from polyswarm.polymap.vectortypes import (
     _along_obstacles,
@@ -77,8 +77,8 @@ class Merging:
             return MergeResult(self, frozenset())
         geoms = list(checked) if checked is not None else [p.validate() for p in polygons]
         segs = [p.segments() for p in polygons]
-        s = np.concatenate([st[t == VectorType.OBSTACLE] for st, _, t in segs])
-        e = np.concatenate([en[t == VectorType.OBSTACLE] for _, en, t in segs])
+        s = np.concatenate([st[t == OBSTACLE] for st, _, t in segs])
+        e = np.concatenate([en[t == OBSTACLE] for _, en, t in segs])
         try:
             if clip is not None:
                 geoms, s, e = _clipped(geoms, s, e, clip)
@@ -176,7 +176,7 @@ class Merging:
         # frontiers, either way round (a short obstacle on a long frontier, or the reverse)
         k = np.nonzero(covered)[0]
         obst = [cells[i].obstacle_vectors for i in k]
-        front = [mine[i].vectors_of_type(VectorType.FRONTIER) for i in k]
+        front = [mine[i].frontier_vectors for i in k]
         o_own = np.repeat(k, [len(o[0]) for o in obst])
         f_own = np.repeat(k, [len(f[0]) for f in front])
         if len(o_own) and len(f_own):
@@ -266,7 +266,7 @@ class Merging:
         # a cell whose region and neighbours stay as they were can change only where an
         # obstacle vector retypes one of its frontiers; the others are not typed again
         same = [self.cells[i] for i in idxs if i not in need and i in self.cells]
-        fronts = [c.vectors_of_type(VectorType.FRONTIER) for c in same]
+        fronts = [c.frontier_vectors for c in same]
         owner = np.repeat(np.arange(len(same)), [len(f[0]) for f in fronts])
         if len(owner):
             retyped = _obstacle_mask(

@@ -79,6 +79,13 @@ class VectorType(IntEnum):
     SECTOR = 2  # explored space continues in an adjacent polygon (cell border or split)
 
 
+# The types as plain ints, for comparisons with numpy arrays on hot paths: numpy asks an
+# IntEnum member for its array protocol through the enum's slow ``__getattr__``, which
+# made ``types == VectorType.OBSTACLE`` five times slower than ``types == OBSTACLE``
+# (200 vectors: 7.7 against 1.6 us; 1.6 million such tests on the maze's coverage route)
+OBSTACLE, FRONTIER, SECTOR = (int(t) for t in VectorType)
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
     return a

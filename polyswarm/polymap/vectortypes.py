@@ -17,6 +17,7 @@ from polyswarm.polymap.rings import (
     BORDER_TOL_M,
     CREEP_SHARE,
     MATCH_TOL_M,
+    OBSTACLE,
     SECTOR_GAP_M,
     SNAP_ANGLE_DEG,
     UNITS_PER_M,
@@ -362,7 +363,7 @@ def fill_notches(cell: Cell, depth_m: float) -> Cell:
     ``depth_m``, and the wall becomes the straight outer envelope. Repeated to a fixed
     point, so merging the same keyframe again still changes nothing.
     """
-    if not (cell.vectors[2] == VectorType.OBSTACLE).any():
+    if not (cell.vectors[2] == OBSTACLE).any():
         return cell
     x0, y0, x1, y1 = cell.bounds
     changed = False
@@ -384,8 +385,8 @@ def fill_notches(cell: Cell, depth_m: float) -> Cell:
                 L = np.hypot(uw[:, 0], uw[:, 1])
                 cand = (
                     (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] < 0)
-                    & (ty == VectorType.OBSTACLE)
-                    & (ty[prev] == VectorType.OBSTACLE)
+                    & (ty == OBSTACLE)
+                    & (ty[prev] == OBSTACLE)
                     & (np.abs(_cross(uw, xy - u)) < depth_m * np.where(L > 0, L, 1.0))
                     & (np.abs(xy[:, 0] - x0) > BORDER_TOL_M)
                     & (np.abs(xy[:, 0] - x1) > BORDER_TOL_M)
