@@ -220,6 +220,7 @@ def _cells_of(pmap: GridPolyMap, atlas: Atlas, kid: int) -> set[CellIndex]:
     cs = pmap.cell_size
     a = np.array(ij, dtype=float) * cs
     geom = atlas.polygons[kid].to_shapely()
+    shapely.prepare(geom)  # one polygon against tens of cells
     hit = shapely.intersects(geom, shapely.box(a[:, 0], a[:, 1], a[:, 0] + cs, a[:, 1] + cs))
     return {ix for ix, h in zip(ij, hit, strict=True) if h}
 

@@ -377,8 +377,8 @@ def fill_notches(cell: Cell, depth_m: float) -> Cell:
                 n = len(xy)
                 if n <= 3:
                     break
-                prev = np.r_[n - 1, np.arange(n - 1)]
-                nxt = np.r_[np.arange(1, n), 0]
+                prev = np.arange(-1, n - 1)  # -1: the last vertex
+                nxt = np.arange(1, n + 1) % n
                 u, w = xy[prev], xy[nxt]
                 a, b = xy - u, w - xy
                 uw = w - u
