@@ -21,7 +21,7 @@ from polyswarm.polymap.deltas import MapDelta, MergeOp, MergeResult, cells_diges
 from polyswarm.polymap.merge import Merging
 from polyswarm.polymap.queries import MapQueries
 from polyswarm.polymap.regions import _polygon_parts
-from polyswarm.polymap.rings import PRECISION_M, CellIndex, TypedPolygon, VectorType
+from polyswarm.polymap.rings import OBSTACLE, PRECISION_M, CellIndex, TypedPolygon, VectorType
 from polyswarm.polymap.vectortypes import _typed_polygons
 
 
@@ -65,7 +65,7 @@ class GridPolyMap(Merging, MapQueries):
         segs = [p.segments() for p in polygons]
         s = np.concatenate([x[0] for x in segs])
         e = np.concatenate([x[1] for x in segs])
-        obstacle = np.concatenate([x[2] for x in segs]) == VectorType.OBSTACLE
+        obstacle = np.concatenate([x[2] for x in segs]) == OBSTACLE
         merged = cls(cell_size)._merge_geometry(geom, s[obstacle], e[obstacle]).map
         cells = {k: c.with_version(version) for k, c in merged.cells.items()}
         return cls(cell_size, cells, version)

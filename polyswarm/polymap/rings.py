@@ -162,7 +162,7 @@ class TypedPolygon:
                 raise InvalidPolygonError(f"{name} has {len(ring)} vertices, need at least 3")
             if not np.all(np.isfinite(ring.xy)):
                 raise InvalidPolygonError(f"{name} has NaN or infinite coordinates")
-            if np.any(ring.types > VectorType.SECTOR):
+            if np.any(ring.types > SECTOR):
                 raise InvalidPolygonError(f"{name} has an unknown vector type")
             area = ring.signed_area
             if area == 0:
