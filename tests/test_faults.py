@@ -53,16 +53,27 @@ def test_agent_killed_and_restarted_resumes_its_map(tmp_path):
     assert_nothing_lost(out)
 
 
+# what each process has persisted once it has something to resume from (in the run's state/)
+PERSISTED = {
+    "r1": "r1.polymap",
+    "r2": "r2.polymap",
+    "coordinator": "coordinator-merged.polymap",
+    "sim": "sim.json",
+}
+
+
 def _kill_from_outside(out, name: str, after_s: float, seen: dict) -> None:
     """SIGKILL ``name`` by its process id (``logs/pids.json``), as the kernel's
-    out-of-memory killer would: not through launch's fault injection."""
+    out-of-memory killer would: not through launch's fault injection. It is killed
+    ``after_s`` seconds after it first persisted its state (on a slow machine a fixed
+    delay from launch can come before that, and there is nothing to resume from)."""
     import os
     import signal
     import time
 
-    pids = out / "logs" / "pids.json"
-    deadline = time.monotonic() + 60
-    while not pids.exists() and time.monotonic() < deadline:
+    pids, state = out / "logs" / "pids.json", out / "state" / PERSISTED[name]
+    deadline = time.monotonic() + 120
+    while not (pids.exists() and state.exists()) and time.monotonic() < deadline:
         time.sleep(0.2)
     time.sleep(after_s)
     pid = json.loads(pids.read_text())[name]
@@ -76,7 +87,7 @@ def test_a_process_killed_from_outside_is_restarted_and_the_mission_goes_on(tmp_
 
     seen: dict = {}
     killer = threading.Thread(
-        target=_kill_from_outside, args=(tmp_path / "run", victim, 5.0, seen), daemon=True
+        target=_kill_from_outside, args=(tmp_path / "run", victim, 3.0, seen), daemon=True
     )
     killer.start()
     m, out = launch(tmp_path, "--world", "office")  # long enough to be killed in (rooms: 5 s)
@@ -100,7 +111,7 @@ def test_no_restart_stops_the_mission_when_a_process_dies(tmp_path):
 
     seen: dict = {}
     threading.Thread(
-        target=_kill_from_outside, args=(tmp_path / "run", "r1", 5.0, seen), daemon=True
+        target=_kill_from_outside, args=(tmp_path / "run", "r1", 3.0, seen), daemon=True
     ).start()
     m, _ = launch(tmp_path, "--no-restart", "--world", "office")
     assert m["stopped_because"] == "process exited: r1 (code -9)" and m["restarts"] == {}
