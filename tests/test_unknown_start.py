@@ -35,3 +35,30 @@ def test_robots_at_unknown_scattered_starts_are_found_merged_and_explore(tmp_pat
     committed = log.index("frame of r2 committed")
     joined = log.find("robot r2 joins the swarm's map")
     assert joined == -1 or committed < joined
+
+
+@pytest.mark.slow
+def test_a_coordinator_killed_while_a_robot_waits_places_it_after_its_restart(tmp_path):
+    """The coordinator is killed while r2 explores alone, and started again. No frame is
+    persisted while a robot waits: the new coordinator restores the merged map, matches
+    r2 afresh and still places it right; nothing either robot shared is lost."""
+    from polyswarm.benchmarks.faults import lost_space
+
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "2", "--world", "office"]
+    cmd += ["--seed", "2", "--unknown-start", "--speed", "0", "--stop-coverage", "0.99"]
+    cmd += ["--fault", "kill:coordinator@15,restart:coordinator@20"]
+    cmd += ["--wall-limit", "400", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    m = json.loads((out / "metrics.json").read_text())
+    log = " ".join((out / "logs" / "coordinator.log").read_text().split())
+    assert log.count("coordinator up") == 2 and "restored the merged map" in log
+    assert log.index("restored the merged map") < log.index("frame of r2 committed")
+    assert m["unanchored"] == [] and set(m["anchors"]) == {"r2"}
+    a = m["anchors"]["r2"]
+    assert a["err_m"] <= 0.10 and a["err_deg"] <= 1.0, a
+    assert m["final_coverage"] >= 0.99 and m["map_iou"] >= 0.95
+    for rid, v in lost_space(out).items():
+        assert v["missing_m2"] <= 1e-3 * v["shared_m2"], f"{v} of {rid} not in the merge"
+        assert v["dropped_m2"] <= 1e-3 * v["shared_m2"], f"{rid} lost what it had sent: {v}"
