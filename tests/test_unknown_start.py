@@ -62,3 +62,52 @@ def test_a_coordinator_killed_while_a_robot_waits_places_it_after_its_restart(tm
     for rid, v in lost_space(out).items():
         assert v["missing_m2"] <= 1e-3 * v["shared_m2"], f"{v} of {rid} not in the merge"
         assert v["dropped_m2"] <= 1e-3 * v["shared_m2"], f"{rid} lost what it had sent: {v}"
+
+
+def _kill_once_logged(out, name: str, line: str, seen: dict) -> None:
+    """SIGKILL process ``name`` (by ``logs/pids.json``) once its log holds ``line``."""
+    import os
+    import signal
+    import time
+
+    log, pids = out / "logs" / f"{name}.log", out / "logs" / "pids.json"
+    deadline = time.monotonic() + 500
+    while time.monotonic() < deadline:
+        if log.exists() and line in " ".join(log.read_text().split()):
+            os.kill(json.loads(pids.read_text())[name], signal.SIGKILL)
+            seen["killed"] = True
+            return
+        time.sleep(0.2)
+
+
+@pytest.mark.slow
+def test_a_coordinator_killed_after_a_robot_joined_takes_it_as_placed(tmp_path):
+    """The coordinator is SIGKILLed from outside once r2 has joined the shared map, and
+    the launch restarts it. r2's poses name the anchor it was sent: the new coordinator
+    takes it as placed (its map is in the shared frame already), does not match it
+    again, and the mission completes with nothing lost."""
+    import threading
+
+    from polyswarm.benchmarks.faults import lost_space
+
+    out, seen = tmp_path / "run", {}
+    line = "robot r2 joins the swarm's map"
+    threading.Thread(
+        target=_kill_once_logged, args=(out, "coordinator", line, seen), daemon=True
+    ).start()
+    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "2", "--world", "office"]
+    cmd += ["--seed", "2", "--unknown-start", "--speed", "0", "--stop-coverage", "0.99"]
+    cmd += ["--wall-limit", "400", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert seen.get("killed"), "r2 never joined, or the coordinator was never killed"
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["restarts"] == {"coordinator": 1}
+    log = " ".join((out / "logs" / "coordinator.log").read_text().split())
+    after = log[log.rindex("coordinator up") :]  # the restarted coordinator's lines
+    assert "robot r2 is in the shared frame already" in after
+    assert "frame of r2 committed" not in after  # not matched again
+    assert m["unanchored"] == [] and m["final_coverage"] >= 0.99 and m["map_iou"] >= 0.95
+    for rid, v in lost_space(out).items():
+        assert v["missing_m2"] <= 1e-3 * v["shared_m2"], f"{v} of {rid} not in the merge"
+        assert v["dropped_m2"] <= 1e-3 * v["shared_m2"], f"{rid} lost what it had sent: {v}"
