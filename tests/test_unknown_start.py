@@ -37,33 +37,6 @@ def test_robots_at_unknown_scattered_starts_are_found_merged_and_explore(tmp_pat
     assert joined == -1 or committed < joined
 
 
-@pytest.mark.slow
-def test_a_coordinator_killed_while_a_robot_waits_places_it_after_its_restart(tmp_path):
-    """The coordinator is killed while r2 explores alone, and started again. No frame is
-    persisted while a robot waits: the new coordinator restores the merged map, matches
-    r2 afresh and still places it right; nothing either robot shared is lost."""
-    from polyswarm.benchmarks.faults import lost_space
-
-    out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "2", "--world", "office"]
-    cmd += ["--seed", "2", "--unknown-start", "--speed", "0", "--stop-coverage", "0.99"]
-    cmd += ["--fault", "kill:coordinator@15,restart:coordinator@20"]
-    cmd += ["--wall-limit", "400", "--out", str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    m = json.loads((out / "metrics.json").read_text())
-    log = " ".join((out / "logs" / "coordinator.log").read_text().split())
-    assert log.count("coordinator up") == 2 and "restored the merged map" in log
-    assert log.index("restored the merged map") < log.index("frame of r2 committed")
-    assert m["unanchored"] == [] and set(m["anchors"]) == {"r2"}
-    a = m["anchors"]["r2"]
-    assert a["err_m"] <= 0.10 and a["err_deg"] <= 1.0, a
-    assert m["final_coverage"] >= 0.99 and m["map_iou"] >= 0.95
-    for rid, v in lost_space(out).items():
-        assert v["missing_m2"] <= 1e-3 * v["shared_m2"], f"{v} of {rid} not in the merge"
-        assert v["dropped_m2"] <= 1e-3 * v["shared_m2"], f"{rid} lost what it had sent: {v}"
-
-
 def _kill_once_logged(out, name: str, line: str, seen: dict) -> None:
     """SIGKILL process ``name`` (by ``logs/pids.json``) once its log holds ``line``."""
     import os
@@ -81,11 +54,15 @@ def _kill_once_logged(out, name: str, line: str, seen: dict) -> None:
 
 
 @pytest.mark.slow
-def test_a_coordinator_killed_after_a_robot_joined_takes_it_as_placed(tmp_path):
-    """The coordinator is SIGKILLed from outside once r2 has joined the shared map, and
-    the launch restarts it. r2's poses name the anchor it was sent: the new coordinator
-    takes it as placed (its map is in the shared frame already), does not match it
-    again, and the mission completes with nothing lost."""
+def test_a_coordinator_killed_before_and_after_a_robot_joins_places_it_once(tmp_path):
+    """The coordinator dies twice in one launch (one launch for both: CI's time).
+
+    First while r2 explores alone (killed at 15 s, started again at 20 s): no frame is
+    persisted while a robot waits, so the new coordinator restores the merged map and
+    matches r2 afresh. Then SIGKILLed from outside once r2 has joined the shared map (the
+    launch restarts it): r2's poses name the anchor it was sent, so the third
+    coordinator takes r2 as placed and does not match it again. r2's frame is right, the
+    run reaches 99 %, and nothing either robot shared is lost."""
     import threading
 
     from polyswarm.benchmarks.faults import lost_space
@@ -97,17 +74,25 @@ def test_a_coordinator_killed_after_a_robot_joined_takes_it_as_placed(tmp_path):
     ).start()
     cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "2", "--world", "office"]
     cmd += ["--seed", "2", "--unknown-start", "--speed", "0", "--stop-coverage", "0.99"]
+    cmd += ["--fault", "kill:coordinator@15,restart:coordinator@20"]
     cmd += ["--wall-limit", "400", "--out", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert seen.get("killed"), "r2 never joined, or the coordinator was never killed"
     m = json.loads((out / "metrics.json").read_text())
-    assert m["restarts"] == {"coordinator": 1}
     log = " ".join((out / "logs" / "coordinator.log").read_text().split())
-    after = log[log.rindex("coordinator up") :]  # the restarted coordinator's lines
-    assert "robot r2 is in the shared frame already" in after
-    assert "frame of r2 committed" not in after  # not matched again
-    assert m["unanchored"] == [] and m["final_coverage"] >= 0.99 and m["map_iou"] >= 0.95
+    runs = log.split("coordinator up")  # what each coordinator process logged
+    assert len(runs) == 4, "expected three coordinator processes"
+    waiting, joined, placed = runs[1:]
+    # (a restarted coordinator logs the restore before it is up: in the run before)
+    assert "restored the merged map" in waiting and "frame of r2 committed" not in waiting
+    assert "frame of r2 committed" in joined and line in joined
+    assert "robot r2 is in the shared frame already" in placed
+    assert "frame of r2 committed" not in placed  # not matched again
+    assert m["unanchored"] == [] and set(m["anchors"]) == {"r2"}
+    a = m["anchors"]["r2"]
+    assert a["err_m"] <= 0.10 and a["err_deg"] <= 1.0, a
+    assert m["final_coverage"] >= 0.99 and m["map_iou"] >= 0.95
     for rid, v in lost_space(out).items():
         assert v["missing_m2"] <= 1e-3 * v["shared_m2"], f"{v} of {rid} not in the merge"
         assert v["dropped_m2"] <= 1e-3 * v["shared_m2"], f"{rid} lost what it had sent: {v}"
