@@ -62,13 +62,22 @@ PERSISTED = {
 }
 
 
-def _kill_from_outside(out, name: str, after_s: float, seen: dict) -> None:
-    """SIGKILL ``name`` by its process id (``logs/pids.json``), as the kernel's
-    out-of-memory killer would: not through launch's fault injection. It is killed
-    ``after_s`` seconds after it first persisted its state (on a slow machine a fixed
-    delay from launch can come before that, and there is nothing to resume from)."""
+def kill_by_pid(out, name: str) -> int:
+    """SIGKILL process ``name`` of the launch writing to ``out`` by its process id
+    (``logs/pids.json``), as the kernel's out-of-memory killer would: not through
+    launch's fault injection. Returns the id."""
     import os
     import signal
+
+    pid = json.loads((out / "logs" / "pids.json").read_text())[name]
+    os.kill(pid, signal.SIGKILL)
+    return pid
+
+
+def _kill_from_outside(out, name: str, after_s: float, seen: dict) -> None:
+    """``kill_by_pid`` ``after_s`` seconds after ``name`` first persisted its state (on a
+    slow machine a fixed delay from launch can come before that, and there is nothing to
+    resume from)."""
     import time
 
     pids, state = out / "logs" / "pids.json", out / "state" / PERSISTED[name]
@@ -76,9 +85,7 @@ def _kill_from_outside(out, name: str, after_s: float, seen: dict) -> None:
     while not (pids.exists() and state.exists()) and time.monotonic() < deadline:
         time.sleep(0.2)
     time.sleep(after_s)
-    pid = json.loads(pids.read_text())[name]
-    os.kill(pid, signal.SIGKILL)
-    seen["pid"] = pid
+    seen["pid"] = kill_by_pid(out, name)
 
 
 @pytest.mark.parametrize("victim", ["r2", "coordinator", "sim"])
