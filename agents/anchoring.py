@@ -7,12 +7,12 @@ Until the coordinator knows where that frame lies in the shared map frame:
   poses and status, and assigns it frontiers of its map, in its frame. Nothing of it
   enters the merged map, and the other robots are not planned around it;
 * every ``MATCH_PERIOD_S`` its map is matched with the merged map
-  (``polyswarm.mapmatch.match_maps``, in a worker thread: a match took 0.1-2.9 s on
+  (``polyswarm.frames.mapmatch.match_maps``, in a worker thread: a match took 0.1-2.9 s on
   recorded maps of the procedural worlds, 2.0-2.9 s on the thesis's 80 m loop;
   the pose's symmetric images are not checked, the sightings that commit a frame rule
   them out), and every match, accepted or not, is logged with its evidence;
 * a match's candidate poses that the robots' sightings contradict are left out
-  (``polyswarm.sighting``: the frame would put one robot where another's lidar looked
+  (``polyswarm.frames.sighting``: the frame would put one robot where another's lidar looked
   and saw nothing); in a symmetric building that is what tells the truth from its
   rotated images;
 * while a match proposes a frame, the robot is drawn towards where that frame puts the
@@ -36,7 +36,7 @@ Until the coordinator knows where that frame lies in the shared map frame:
 * from then on its frame is audited every ``AUDIT_PERIOD_S`` on what came since the
   hand-over: the sightings, and its map against the maps of the robots whose frames
   are not in doubt (or, where it does not overlap them, of those merged before it;
-  ``polyswarm.mapmatch.fit_at``). ``UNDO_CONTRADICTIONS`` moments where one robot
+  ``polyswarm.frames.mapmatch.fit_at``). ``UNDO_CONTRADICTIONS`` moments where one robot
   looked where another's pose put it and saw nothing, or ``UNDO_AUDITS`` audits in a
   row where ``UNDO_CONFLICT_SHARE`` of the walls the maps share stand in the other's
   clear space, undo the merge: its map leaves the merged map
@@ -71,7 +71,7 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
-from polyswarm.mapmatch import (
+from polyswarm.frames.mapmatch import (
     MIN_OVERLAP_M2,
     MIN_SEEN,
     FrameEstimate,
@@ -82,8 +82,7 @@ from polyswarm.mapmatch import (
     match_maps,
     verdict_at,
 )
-from polyswarm.se2 import compose, inverse, transform_points
-from polyswarm.sighting import (
+from polyswarm.frames.sighting import (
     MIN_CONTRADICTIONS,
     Room,
     Sighting,
@@ -92,6 +91,7 @@ from polyswarm.sighting import (
     distinct_places,
     mutual_seen,
 )
+from polyswarm.se2 import compose, inverse, transform_points
 from protocols.messages import Anchor, Pose
 
 log = logging.getLogger(__name__)
@@ -715,7 +715,7 @@ def _log_evidence(rows, level: int) -> None:
 def _contradicted_where(theirs: dict[str, Track], mine: dict[str, Track], maps):
     """A function of the frame of ``mine``'s robots (their tracks by robot, in the frame
     of ``maps[1]``) in the frame of ``maps[0]``: the moments the sightings contradict it
-    (``polyswarm.sighting.contradicted_where``, over every pair of one of the other
+    (``polyswarm.frames.sighting.contradicted_where``, over every pair of one of the other
     robots' tracks ``theirs`` and one of ``mine``), as ``_Audit.evidence``'s rows (the
     other robot, the robot of ``mine``, then the row); their number is what a match
     counts. Where the robots can stand in each map (``Room``) is

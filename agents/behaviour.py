@@ -33,8 +33,8 @@ from typing import Protocol
 
 import numpy as np
 
-from polyswarm.control import Follow, PathFollower
 from polyswarm.errors import OffMapError, PlanningError
+from polyswarm.nav.control import Follow, PathFollower
 from protocols.messages import Assignment, AssignmentKind, RobotState
 
 log = logging.getLogger(__name__)
@@ -92,7 +92,7 @@ class Planning(Protocol):
     """What the behaviour asks of the agent."""
 
     def plan(self, start: np.ndarray, goal: np.ndarray, partial: bool):
-        """A path (``polyswarm.planner.Path``) or ``PlanningError``."""
+        """A path (``polyswarm.nav.planner.Path``) or ``PlanningError``."""
 
     def yield_point(self, xy: np.ndarray, other: np.ndarray) -> np.ndarray | None:
         """A free point about a metre from ``xy``, away from ``other``."""

@@ -44,13 +44,13 @@ from agents.merger import Merged, MergeJob, MergeLostError, MergeProcess, merge_
 from agents.replay import Replayed, ReplayPool
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
-from polyswarm.explore import GraphIndex, Reach, Strategy, assign, target_groups
-from polyswarm.follow import Atlas, CorrectionOp, largest_move_m, replay_correction
-from polyswarm.jointgraph import KeyframeLedger
-from polyswarm.navgraph import NavGraph, clear_of
+from polyswarm.explore.assign import GraphIndex, Reach, Strategy, assign, target_groups
+from polyswarm.explore.targets import Sensor, Target, TargetCache, frontier_targets
+from polyswarm.frames.jointgraph import KeyframeLedger
+from polyswarm.frames.sighting import SIGHTING_SLACK_M
+from polyswarm.nav.navgraph import NavGraph, clear_of
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions, VectorType
-from polyswarm.sighting import SIGHTING_SLACK_M
-from polyswarm.targets import Sensor, Target, TargetCache, frontier_targets
+from polyswarm.slam.follow import Atlas, CorrectionOp, largest_move_m, replay_correction
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import (
     decode_any_map,
@@ -141,7 +141,7 @@ class RobotInfo:
     alive: bool = False
     pose: np.ndarray | None = None
     map: GridPolyMap | None = None
-    # the keyframes its merges carried, to replay its corrections (polyswarm.follow)
+    # the keyframes its merges carried, to replay its corrections (polyswarm.slam.follow)
     atlas: Atlas = field(default_factory=Atlas)
     # the same keyframes' walls and frames, for the joint pose graph (agents.joint)
     ledger: KeyframeLedger = field(default_factory=KeyframeLedger)

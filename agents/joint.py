@@ -1,4 +1,4 @@
-"""The swarm's joint pose graph on a thread of the coordinator (``polyswarm.jointgraph``).
+"""The swarm's joint pose graph on a thread of the coordinator (``polyswarm.frames.jointgraph``).
 
 Every ``JOINT_PERIOD_S`` simulated seconds the keyframes of the robots in the merged map
 (their ledgers: the merges and corrections the coordinator replayed) are matched with
@@ -19,14 +19,14 @@ import logging
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 
-from polyswarm.follow import quantize_pose
-from polyswarm.jointgraph import (
+from polyswarm.frames.jointgraph import (
     PRIOR_MOVE_M,
     PRIOR_SIGMA_M,
     PRIOR_SIGMA_RAD,
     JointGraph,
     moved_m,
 )
+from polyswarm.slam.follow import quantize_pose
 from protocols.messages import MAX_PRIORS, Priors
 
 log = logging.getLogger(__name__)

@@ -1,7 +1,7 @@
 """A robot waiting for its frame, with no frontier of its own map it may take (none left,
 or those left failed lately), tours standpoints around where its candidate frame puts the
 nearest robot of the swarm (the ``rendezvous`` ``agents.anchoring`` gives its solo
-coordinator; ``polyswarm.meeting``).
+coordinator; ``polyswarm.frames.meeting``).
 
 A frame is committed only where the robots saw each other in three distinct places. A
 waiting robot is drawn towards the other robot along its frontiers; in the rooms world
@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from polyswarm.config import Config
-from polyswarm.meeting import standpoints
-from polyswarm.sighting import SEEN_APART_M
+from polyswarm.frames.meeting import standpoints
+from polyswarm.frames.sighting import SEEN_APART_M
 from protocols.messages import Assignment, AssignmentKind, RobotState
 
 log = logging.getLogger(__name__)

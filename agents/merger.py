@@ -4,7 +4,7 @@ process of its own.
 What a merge costs the coordinator after the replays moved to their processes
 (``agents.replay``): merging the robots' changed cells into the merged map, updating the
 navigation graph and its matrix, and the frontier facts that depend on the map alone
-(``polyswarm.targets.map_facts``) - together 60-85 % of the thread's work with 3 robots
+(``polyswarm.explore.targets.map_facts``) - together 60-85 % of the thread's work with 3 robots
 (``polyswarm bench cycle``, stages ``merge`` and ``plan``). ``merge_step`` does all of
 it, given the cells; ``MergeProcess`` runs it on a process, one job at a time, while the
 coordinator plans on the map it has. The coordinator sends the robots' cells from its
@@ -30,10 +30,10 @@ from dataclasses import dataclass
 from agents.replay import receive, start_process, stop_process
 from polyswarm.config import NavConfig
 from polyswarm.errors import PolyswarmError
-from polyswarm.explore import GraphIndex
-from polyswarm.navgraph import GraphPatch, NavGraph
+from polyswarm.explore.assign import GraphIndex
+from polyswarm.explore.targets import Sensor, TargetCache, map_facts
+from polyswarm.nav.navgraph import GraphPatch, NavGraph
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOptions
-from polyswarm.targets import Sensor, TargetCache, map_facts
 
 log = logging.getLogger(__name__)
 

@@ -27,8 +27,8 @@ from typing import NamedTuple
 import numpy as np
 
 from polyswarm.errors import PolyswarmError
-from polyswarm.odomscale import OdometryScale
 from polyswarm.polymap import GridPolyMap
+from polyswarm.slam.odomscale import OdometryScale
 from protocols.mapcodec import decode_any_map, decode_delta, encode_cells_map
 
 log = logging.getLogger(__name__)

@@ -41,8 +41,8 @@ from multiprocessing.connection import Connection, wait
 
 from agents import persist
 from polyswarm.errors import MapError, PolyswarmError
-from polyswarm.follow import Atlas, largest_move_m, replay_correction
 from polyswarm.polymap import GridPolyMap, MapDelta
+from polyswarm.slam.follow import Atlas, largest_move_m, replay_correction
 from protocols.mapcodec import encode_delta
 
 log = logging.getLogger(__name__)

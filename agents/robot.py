@@ -28,17 +28,17 @@ from agents import persist
 from agents.behaviour import Behaviour
 from agents.seen import SeenObstacles
 from polyswarm.config import Config, SensorSource, known_starts
-from polyswarm.control import ControlParams, PathFollower
 from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
-from polyswarm.follow import CorrectionOp, pose_of
-from polyswarm.navgraph import NavGraph, clear_of
-from polyswarm.odometry import OdometryBuffer
-from polyswarm.planner import Planner
+from polyswarm.frames.sighting import PROFILE_PERIOD_S, clear_profile
+from polyswarm.nav.control import ControlParams, PathFollower
+from polyswarm.nav.navgraph import NavGraph, clear_of
+from polyswarm.nav.planner import Planner
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, VectorType
-from polyswarm.scan import LaserScan, beam_angles, classify, deskew_motion, scan_to_points
 from polyswarm.se2 import compose, transform_points
-from polyswarm.sighting import PROFILE_PERIOD_S, clear_profile
-from polyswarm.slam import PolySlam
+from polyswarm.slam.follow import CorrectionOp, pose_of
+from polyswarm.slam.odometry import OdometryBuffer
+from polyswarm.slam.polyslam import PolySlam
+from polyswarm.slam.scan import LaserScan, beam_angles, classify, deskew_motion, scan_to_points
 from protocols.keys import SwarmKeys, check_name
 from protocols.mapcodec import (
     decode_delta,
@@ -239,7 +239,7 @@ class RobotAgent:
 
     def on_priors(self, p: Priors) -> int:
         """Where the swarm's joint pose graph puts some of this robot's keyframes
-        (``polyswarm.jointgraph``): held in SLAM's pose graph from the next keyframe
+        (``polyswarm.frames.jointgraph``): held in SLAM's pose graph from the next keyframe
         on. Ignored when they are in another frame than the robot's (an anchor since, or
         its frame withdrawn). The priors taken."""
         if p.frame != self.frame or self.own_frame or self._anchor is not None:
@@ -368,7 +368,7 @@ class RobotAgent:
         return bool(self._own_frames)
 
     def _clear_profile(self, scan: LaserScan, returns: np.ndarray) -> bytes:
-        """``polyswarm.sighting.clear_profile`` of this scan (``returns``: its de-skewed
+        """``polyswarm.frames.sighting.clear_profile`` of this scan (``returns``: its de-skewed
         returns in the robot frame)."""
         valid, no_return, _ = classify(scan, self.cfg.sim.lidar.out_of_range)
         blind = beam_angles(scan, self._mount())[~valid & ~no_return]
@@ -749,7 +749,7 @@ def _send(
     sent = 0
     if out.delta is not None:
         # a correction's poses, then the keyframe's merge when it is smaller than the
-        # cells it changed (polyswarm.follow, protocols.mapcodec.encode_updates)
+        # cells it changed (polyswarm.slam.follow, protocols.mapcodec.encode_updates)
         for what, base, ver, payload in encode_updates(out.delta, out.op, out.correction, wire):
             kind = MAP_KIND_OF[what]
             sent += bus.publish_map(me.map_delta, kind, payload, base, ver, stamp_s)

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from polyswarm.navgraph import clear_of
+from polyswarm.nav.navgraph import clear_of
 from polyswarm.polymap import GridPolyMap, VectorType
 
 SEEN_RANGE_M = 1.5  # returns this close are remembered (where the robot is about to drive)

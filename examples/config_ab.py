@@ -28,7 +28,7 @@ def t99(job: tuple[str, int, int, str, float]) -> tuple[float, int, float | None
     world, robots, seed, field, value = job
     from polyswarm.benchmarks.inproc import explore_in_process
     from polyswarm.config import Config, with_overrides
-    from polyswarm.evaluation import time_to_coverage
+    from polyswarm.evaluation.coverage import time_to_coverage
 
     # validated like a TOML file: an unknown field or a bad value is a ConfigError
     cfg = with_overrides(Config(), nested(field.split("."), value))

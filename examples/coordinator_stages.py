@@ -22,10 +22,10 @@ from collections import defaultdict
 import numpy as np
 
 import agents.coordinator as coordinator_module
-import polyswarm.explore as explore_module
-import polyswarm.targets as targets_module
+import polyswarm.explore.assign as explore_module
+import polyswarm.explore.targets as targets_module
 from polyswarm.benchmarks.inproc import explore_in_process
-from polyswarm.navgraph import NavGraph
+from polyswarm.nav.navgraph import NavGraph
 from polyswarm.polymap import GridPolyMap
 
 spent: dict[str, float] = defaultdict(float)  # ms per stage since the last cycle

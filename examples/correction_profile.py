@@ -3,7 +3,7 @@
     python examples/correction_profile.py freiburg-101 [--groups 5,10,20]
 
 Runs PolySLAM on a shared log (real wheel odometry, the default config) and profiles
-every correction the map follows (``polyswarm.follow.apply_moves``): the corrections'
+every correction the map follows (``polyswarm.slam.follow.apply_moves``): the corrections'
 p50 / p95 against the keyframe p95 of the same run, and the functions that took the most
 of their time. Then it unites the keyframe polygons each correction merged again (the
 union ``merge_many`` makes of them) in groups of G consecutive keyframes first, as
@@ -21,11 +21,11 @@ import time
 
 import numpy as np
 
-from polyswarm import follow
 from polyswarm.config import Config
 from polyswarm.data import log_paths
 from polyswarm.polymap import PRECISION_M, merge
 from polyswarm.runners.slam import OdometrySource, run_log
+from polyswarm.slam.polyslam import follow
 
 
 def main() -> None:

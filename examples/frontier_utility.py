@@ -3,7 +3,7 @@
     python examples/frontier_utility.py data:maze 3 0:5 [WEIGHTS] [RADII]
 
 Runs ``explore_in_process`` (simulator, agents and coordinator in one process, no
-Zenoh) for each seed in the range, each weight of ``polyswarm.targets.GAIN_WEIGHT``
+Zenoh) for each seed in the range, each weight of ``polyswarm.explore.targets.GAIN_WEIGHT``
 (metres of path per m2 of unexplored area behind a frontier; default "0,1": the
 length alone, then with the area) and each radius of ``GAIN_RADIUS_M`` (metres the
 area is counted behind the frontier; default: the library's), two runs at a time, and
@@ -27,12 +27,12 @@ SIM_LIMIT_S = 3000.0  # simulated seconds: a run that has not reached 99 % by th
 
 def t99(args: tuple[str, int, int, float, float]) -> tuple[tuple, int, float | None]:
     world, robots, seed, weight, radius = args
-    import polyswarm.targets
+    import polyswarm.explore.targets
     from polyswarm.benchmarks.inproc import explore_in_process
-    from polyswarm.evaluation import time_to_coverage
+    from polyswarm.evaluation.coverage import time_to_coverage
 
-    polyswarm.targets.GAIN_WEIGHT = weight  # this worker process only
-    polyswarm.targets.GAIN_RADIUS_M = radius
+    polyswarm.explore.targets.GAIN_WEIGHT = weight  # this worker process only
+    polyswarm.explore.targets.GAIN_RADIUS_M = radius
     run = explore_in_process(world, robots, SIM_LIMIT_S, seed=seed, stop_coverage=0.99)
     return (weight, radius), seed, time_to_coverage(run.coverage, 0.99)
 
@@ -44,7 +44,7 @@ def main(
     weights: str = "0,1",
     radii: str | None = None,
 ) -> None:
-    from polyswarm.targets import GAIN_RADIUS_M
+    from polyswarm.explore.targets import GAIN_RADIUS_M
 
     a, b = (int(v) for v in seeds.split(":"))
     jobs = [

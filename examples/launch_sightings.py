@@ -3,7 +3,7 @@
 The coordinator logs every match of a waiting robot's map with the places the robots
 saw each other where it puts them, by the rule it decides with and, when that differs,
 by another rule: "seen 2 time(s) (4 by the former rule: within 15 m, no arc)" (the
-sector's arc test, ``polyswarm.sighting.ARC_CLEAR_M``, against the 15 m cap before
+sector's arc test, ``polyswarm.frames.sighting.ARC_CLEAR_M``, against the 15 m cap before
 it; code 82dfaac to 8814950); logs of the 15 m cap's code say "(4 counting sightings
 beyond 15 m)" (the cap against none). Logs of later code carry the arc rule alone: the
 other rule's counts then read as equal. This reads run folders of ``polyswarm bench
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from polyswarm.benchmarks.results import machine_meta
-from polyswarm.mapmatch import MIN_SEEN, frame_error
+from polyswarm.frames.mapmatch import MIN_SEEN, frame_error
 from polyswarm.se2 import compose, inverse
 
 RIGHT_M, RIGHT_RAD = 1.0, math.radians(5.0)  # bench merge's WRONG_M, WRONG_RAD

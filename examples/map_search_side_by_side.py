@@ -3,7 +3,7 @@
 Robots explore a world at scattered starts (``polyswarm bench merge``'s recording: every
 5 simulated seconds each robot's map in its own frame); at every ``STEP``-th moment
 robot 1's map is matched against each other robot's twice, one search after the other
-in this process (``polyswarm.mapsearch.search``, then ``search_fine``), and the verdicts,
+in this process (``polyswarm.frames.mapsearch.search``, then ``search_fine``), and the verdicts,
 poses and times are compared:
 
     python examples/map_search_side_by_side.py docs/results/map-search.json \
@@ -39,7 +39,7 @@ def _pairs(world: str, seed: int, step: int):
 
 
 def _match(a, b, search, images: bool):
-    from polyswarm.mapmatch import MatchError, match_maps
+    from polyswarm.frames.mapmatch import MatchError, match_maps
 
     t0 = time.perf_counter()
     try:
@@ -50,7 +50,7 @@ def _match(a, b, search, images: bool):
 
 
 def _scored(m, truth) -> dict:
-    from polyswarm.mapmatch import frame_error
+    from polyswarm.frames.mapmatch import frame_error
 
     e_m, e_rad = frame_error(m.pose, truth)
     return {
@@ -68,7 +68,7 @@ def _wrong(m: dict) -> bool:
 
 
 def main(out: str, runs: str, step: int = 3, images: bool = False) -> None:
-    from polyswarm.mapsearch import search, search_fine
+    from polyswarm.frames.mapsearch import search, search_fine
     from polyswarm.se2 import wrap
 
     logging.disable(logging.WARNING)

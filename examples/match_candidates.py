@@ -18,7 +18,7 @@ a file per match), and run a launch with ``PS_DUMP=DIR`` set:
 ``X_M,Y_M,THETA_DEG``: the robot's true frame in the merged map's (its committed frame,
 from the coordinator's log, when that was right). Per match: the rank of the first
 search candidate within 1.5 m and 5 deg of it among the coarse candidates
-(``polyswarm.mapsearch``, ``PEAKS`` per heading, or ``--peaks``) and among those the
+(``polyswarm.frames.mapsearch``, ``PEAKS`` per heading, or ``--peaks``) and among those the
 match refines; how many coarse candidates ahead of it (at most ``--ahead``, 300) the
 sightings contradict; the maps' fit
 at the frame after ICP; the places the robots saw each other where it puts them.
@@ -35,10 +35,10 @@ import sys
 import numpy as np
 
 from agents.anchoring import MIN_CONTRADICTIONS, _contradicted_where
-from polyswarm import mapmatch as mm
-from polyswarm import mapsearch as ms
+from polyswarm.frames import mapmatch as mm
+from polyswarm.frames import mapsearch as ms
+from polyswarm.frames.sighting import distinct_places, mutual_seen
 from polyswarm.se2 import wrap
-from polyswarm.sighting import distinct_places, mutual_seen
 
 AHEAD_CHECKED = 300  # coarse candidates ahead of the truth checked against the sightings
 

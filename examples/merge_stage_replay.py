@@ -25,7 +25,7 @@ import numpy as np
 
 
 def record(world: str, out: str) -> None:
-    import polyswarm.slam as slam_module
+    import polyswarm.slam.polyslam as slam_module
     from polyswarm.config import Config
     from polyswarm.runners.slam import run_world
 
@@ -47,8 +47,8 @@ def replay(path: str, n: int | None) -> None:
     from polyswarm.config import Config
     from polyswarm.errors import PolyswarmError
     from polyswarm.polymap import GridPolyMap, cells_digest, snap_polygon
-    from polyswarm.slam import UNITS_PER_M
-    from polyswarm.trim import trim_keyframe
+    from polyswarm.slam.polyslam import UNITS_PER_M
+    from polyswarm.slam.trim import trim_keyframe
 
     with open(path, "rb") as f:
         given = pickle.load(f)[:n]

@@ -18,7 +18,7 @@ import numpy as np
 import polyswarm.polymap as pm
 from polyswarm.config import Config
 from polyswarm.io.carmen import read_carmen
-from polyswarm.slam import PolySlam
+from polyswarm.slam.polyslam import PolySlam
 
 SCANS = 1200  # the first scans of the log (about 280 keyframes)
 BATCH = 150  # cells per coordinator merge (one flush of several robots' changes)

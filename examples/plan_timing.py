@@ -16,8 +16,8 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.errors import PlanningError
-from polyswarm.navgraph import NavGraph
-from polyswarm.planner import Planner
+from polyswarm.nav.navgraph import NavGraph
+from polyswarm.nav.planner import Planner
 from protocols.files import read_polymap
 
 

@@ -20,13 +20,13 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.data import log_paths
-from polyswarm.icp import PointToVectorIcp
 from polyswarm.io.carmen import read_carmen
-from polyswarm.keyframe import keyframe_polygon
 from polyswarm.polymap import VectorType
-from polyswarm.refine import refine_polygon
-from polyswarm.scan import scan_to_points
 from polyswarm.se2 import compose, relative, transform_points, wrap
+from polyswarm.slam.icp import PointToVectorIcp
+from polyswarm.slam.keyframe import keyframe_polygon
+from polyswarm.slam.refine import refine_polygon
+from polyswarm.slam.scan import scan_to_points
 
 SUSPECT_DEG = 3.0  # ICP moved the heading this far from the reference increment...
 SUSPECT_M = 0.3  # ...or the position this far...

@@ -16,9 +16,9 @@ import time
 import numpy as np
 
 from polyswarm.config import Config
-from polyswarm.keyframe import keyframe_polygon
-from polyswarm.refine import refine_polygon
-from polyswarm.scan import scan_to_points
+from polyswarm.slam.keyframe import keyframe_polygon
+from polyswarm.slam.refine import refine_polygon
+from polyswarm.slam.scan import scan_to_points
 from sim import Simulation, load_world
 from sim.route import PurePursuit, coverage_route
 

@@ -1,6 +1,6 @@
 """Growing seen points for the planner: one MultiPoint buffer against one disc per point.
 
-``polyswarm.planner.Planner._grown`` grows the obstacle points a robot's lidar saw that
+``polyswarm.nav.planner.Planner._grown`` grows the obstacle points a robot's lidar saw that
 the map lacks (``agents.seen``, up to 2,000 kept) by the planning radius. GEOS buffers a
 MultiPoint by noding all its circles at once; buffering each point and taking one union
 gives the same shape. This times both side by side (median of ``REPEATS``) on random
@@ -22,7 +22,7 @@ import numpy as np
 import shapely
 
 from polyswarm.benchmarks.results import machine_meta
-from polyswarm.navgraph import BUFFER_SEGMENTS, grown_radius
+from polyswarm.nav.navgraph import BUFFER_SEGMENTS, grown_radius
 
 RADIUS_M = 0.25  # the thesis base's planning radius
 COUNTS = (200, 1000, 2000)  # seen points; agents.seen keeps 2,000 at most

@@ -1,7 +1,7 @@
 """When does a return count as a sighting of a robot? Right and wrong frames, by rule.
 
 A frame of a waiting robot is committed once the robots saw each other in
-``MIN_SEEN`` places where it puts them (``polyswarm.sighting``). This re-records
+``MIN_SEEN`` places where it puts them (``polyswarm.frames.sighting``). This re-records
 ``bench merge``'s explorations (``polyswarm.benchmarks.merge._snapshots``: the same
 worlds, seeds and robots, deterministic) and, at every moment and pose that
 ``bench merge`` stored in a result file, counts the places again by each rule of
@@ -24,13 +24,13 @@ import time
 
 import numpy as np
 
-from polyswarm import sighting
 from polyswarm.benchmarks.merge import _snapshots
 from polyswarm.benchmarks.results import machine_meta
 from polyswarm.config import Config, with_profile
-from polyswarm.mapmatch import MIN_SEEN
+from polyswarm.frames import sighting
+from polyswarm.frames.mapmatch import MIN_SEEN
 
-# the sighting rules tried (``polyswarm.sighting.seen_where``): a range cap in metres, and
+# the sighting rules tried (``polyswarm.frames.sighting.seen_where``): a range cap in metres, and
 # whether the sector's whole arc must lie clear of walls or only its centre
 RULES = {
     "centre, any range": {"max_range_m": math.inf, "arc": False},

@@ -35,10 +35,10 @@ import time
 import numpy as np
 
 import polyswarm
-from polyswarm import evaluation as ev
 from polyswarm.config import Config
+from polyswarm.evaluation import maps as evm
 from polyswarm.polymap import VectorType
-from polyswarm.scan import LaserScan
+from polyswarm.slam.scan import LaserScan
 
 
 def record(world_name: str, out: str) -> None:
@@ -81,7 +81,7 @@ def _scans(d: dict, n: int):
 
 
 def replay(path: str, scans: int, batches: list[int] | None) -> None:
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.polyslam import PolySlam
     from sim import load_world
 
     d = dict(np.load(path))  # loaded once: an npz re-reads an array at every access
@@ -114,16 +114,16 @@ def replay(path: str, scans: int, batches: list[int] | None) -> None:
         s, e, _ = pmap.vectors([VectorType.OBSTACLE])
         print(
             f"  rebuild by {b}: {dt:.1f} s, real-time factor {stream_s / (spent + dt):.2f}, "
-            f"IoU {ev.map_iou(pmap.explored_region(), world.free):.4f}, wall distance "
-            f"{1e3 * ev.wall_distance(s, e, ws, we):.1f} mm, obstacle vectors {len(s)}, "
+            f"IoU {evm.map_iou(pmap.explored_region(), world.free):.4f}, wall distance "
+            f"{1e3 * evm.wall_distance(s, e, ws, we):.1f} mm, obstacle vectors {len(s)}, "
             f"polygons {pmap.polygon_count()}"
         )
 
 
 def refine(path: str) -> None:
-    from polyswarm.keyframe import keyframe_polygon
-    from polyswarm.refine import refine_polygon
-    from polyswarm.scan import scan_to_points
+    from polyswarm.slam.keyframe import keyframe_polygon
+    from polyswarm.slam.refine import refine_polygon
+    from polyswarm.slam.scan import scan_to_points
 
     d = dict(np.load(path))
     c = Config().slam

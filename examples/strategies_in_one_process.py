@@ -23,7 +23,7 @@ def t99(args: tuple[str, int, int, str]) -> tuple[str, int, float | None]:
     world, robots, seed, strategy = args
     from polyswarm.benchmarks.inproc import explore_in_process
     from polyswarm.config import Config
-    from polyswarm.evaluation import time_to_coverage
+    from polyswarm.evaluation.coverage import time_to_coverage
 
     cfg = Config()
     cfg = dataclasses.replace(cfg, explore=dataclasses.replace(cfg.explore, strategy=strategy))

@@ -186,13 +186,13 @@ class IcpConfig:
 
 
 class IcpReference(StrEnum):
-    KEYFRAMES = "keyframes"  # obstacle vectors of the nearby keyframes (polyswarm.submap)
+    KEYFRAMES = "keyframes"  # obstacle vectors of the nearby keyframes (polyswarm.slam.submap)
     MAP = "map"  # obstacle vectors of the merged PolyMap (the thesis' choice)
 
 
 @dataclass(frozen=True)
 class SubmapConfig:
-    """Which keyframes a scan is matched against (polyswarm.submap)."""
+    """Which keyframes a scan is matched against (polyswarm.slam.submap)."""
 
     reference: str = "keyframes"  # IcpReference
     keyframes: int = num(20, 0, 10_000)  # at most this many keyframes nearest the prediction...
@@ -202,7 +202,7 @@ class SubmapConfig:
 
 @dataclass(frozen=True)
 class LoopClosureConfig:
-    """Loop edges and pose-graph optimisation (polyswarm.posegraph)."""
+    """Loop edges and pose-graph optimisation (polyswarm.slam.posegraph)."""
 
     enabled: bool = True
     # a loop joins keyframes at least this many keyframes apart
@@ -212,7 +212,7 @@ class LoopClosureConfig:
     min_inlier_fraction: float = num(0.5, 0.0, 1.0)  # of the scan's valid points
     max_rmse_m: float = positive(0.05, 1.0)  # point-to-vector RMSE of an accepted loop match
     max_correction_m: float = num(2.0, 0.0, 100.0)  # a loop moving the pose more is refused
-    search_window_m: float = num(2.0, 0.0, 100.0)  # wide search (polyswarm.loopsearch)...
+    search_window_m: float = num(2.0, 0.0, 100.0)  # wide search (polyswarm.slam.loopsearch)...
     search_every_keyframes: int = num(5, 1, 1_000_000)  # ...at most this often, not after a loop
     # the window grows with the distance driven since the last loop (drift grows with it;
     # 2-3 % on the logs' noise), up to max_search_window_m; 0: fixed
@@ -257,7 +257,7 @@ class SlamConfig:
     frontier_range_m: float = positive(0.2, 100.0)  # dropouts become frontier points here
     # a beam with no return within the lidar's range crossed free space: it ends this far
     # out (Cartographer's missing_data_ray_length), or at NO_RETURN_SHARE of the range if
-    # that is less (polyswarm.scan). At 0.2 m a robot turning on the spot stood in the
+    # that is less (polyswarm.slam.scan). At 0.2 m a robot turning on the spot stood in the
     # apex of unknown wedges with no room to plan; at 1 m a TurtleBot3 (3.5 m lidar)
     # looking into a room through its door saw no farther than the door, and three robots
     # ended the office at 38 % coverage (2.8 m: 99 % in 220-245 s, seeds 0-1)
@@ -278,16 +278,16 @@ class SlamConfig:
     # 0: not snapped, and deltas go as changed cells
     merge_quantum_m: float = num(0.001, 0.0, 0.05)
     # a keyframe is merged (and sent) with the stretches that cannot change the map
-    # replaced by chords (polyswarm.trim): 8-17 % fewer bytes sent on the shared logs
+    # replaced by chords (polyswarm.slam.trim): 8-17 % fewer bytes sent on the shared logs
     trim_merges: bool = True
     # after a loop closure, the cells of keyframes it moved are merged again at their
-    # new poses (polyswarm.follow), and the correction goes to the coordinator as poses
+    # new poses (polyswarm.slam.follow), and the correction goes to the coordinator as poses
     # (PROTOCOL.md 3.5): the shared map loses the ghosts of the pose errors made before
     # the loop closed (ACES, real odometry: 58 % ghost walls -> 0.8 %). The cost: one
     # correction's p95 is 0.4-1.6 s on the logs (polyswarm bench slam)
     map_follows_graph: bool = True
     # the odometry's distance scale (a wheel radius off) is learnt from keyframes ICP
-    # pinned down and corrected where ICP keeps the odometry (polyswarm.odomscale). Off:
+    # pinned down and corrected where ICP keeps the odometry (polyswarm.slam.odomscale). Off:
     # with the TurtleBot3's 3.5 m lidar the learnt scale was up to 1.8 % wrong and 3-robot
     # office runs gained nothing measurable (docs/slam-log.md); on in the
     # thesis-noisy-odometry profile, where the 30 m lidar makes it right to 0.5 %
@@ -317,7 +317,7 @@ class NavConfig:
     # 0 to robot_radius_m + clearance_margin_m. Beyond a frontier nothing is known, not a
     # wall; the local controller keeps its distance from whatever the live scan shows
     # there. With the full clearance, a door seen at an angle let no robot in (see
-    # polyswarm.navgraph)
+    # polyswarm.nav.navgraph)
     frontier_clearance_m: float = num(0.1, 0.0, 10.0)
     # where nothing wider leads on (a door 0.7 m wide for a 0.4 m robot), the path may keep
     # only this much beyond the radius from mapped obstacles: the map's wall error. Such
@@ -336,7 +336,7 @@ class NavConfig:
 
 
 class Strategy(StrEnum):
-    """How the coordinator assigns frontier targets (polyswarm.explore.assign)."""
+    """How the coordinator assigns frontier targets (polyswarm.explore.assign.assign)."""
 
     HUNGARIAN = "hungarian"
     GREEDY = "greedy"
@@ -372,7 +372,7 @@ class ExploreConfig:
     merge_process: bool = True
     # robots correct each other: the coordinator's joint pose graph over every robot's
     # keyframes sends priors where one robot's walls align on another's
-    # (polyswarm.jointgraph); false: each robot corrects only itself
+    # (polyswarm.frames.jointgraph); false: each robot corrects only itself
     joint_graph: bool = True
 
 
@@ -381,7 +381,7 @@ class RobotEntry:
     """A robot of the swarm and its start pose in the shared map frame (x m, y m,
     theta rad). Left out: not known. The robot then maps in a frame of its own until the
     coordinator finds where that frame lies by matching its map with the merged map
-    (``polyswarm.mapmatch``); when no robot's start is given, the first robot's start
+    (``polyswarm.frames.mapmatch``); when no robot's start is given, the first robot's start
     is the shared frame's origin (``known_starts``)."""
 
     id: str = "r1"

@@ -206,7 +206,7 @@ THESIS_NOISY_ODOMETRY = Profile(
     lidar=dict(THESIS.lidar),
     base=dict(THESIS.base),
     odometry_noise=dict(TURTLEBOT3.odometry_noise),
-    # the wheel scale learnt (polyswarm.odomscale): single-robot loop explorations with
+    # the wheel scale learnt (polyswarm.slam.odomscale): single-robot loop explorations with
     # this odometry, seeds 0-4, reached 99 % in 2 of 5 runs without, 4 of 5 with (8 of 10
     # over seeds 0-9; docs/exploration-log.md)
     slam={**THESIS.slam, "learn_odometry_scale": True},

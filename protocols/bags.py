@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from polyswarm.errors import DataFormatError
-from polyswarm.scan import LaserScan
+from polyswarm.slam.scan import LaserScan
 from protocols import ros
 from protocols.messages import ProtocolError
 

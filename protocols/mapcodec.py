@@ -34,7 +34,7 @@ sender's map, ``polymap.MergeOp``) is one varint sequence::
              h = zz(dx) << 2 | type; vertices in units = q * (x, y), absolute
        then, from a map that follows its pose graph: id (the keyframe's pose-graph id)
 
-A correction (keyframes moved by a loop closure, ``polyswarm.follow.CorrectionOp``)::
+A correction (keyframes moved by a loop closure, ``polyswarm.slam.follow.CorrectionOp``)::
 
     b: cs base digest n  (did zz(ddx) zz(ddy) zz(ddtheta))[n]
        did: the id's step from the previous entry's (the first from -1: ids ascend);
@@ -61,7 +61,6 @@ import numpy as np
 import shapely
 
 from polyswarm.errors import DecodeError, PolyswarmError
-from polyswarm.follow import CorrectionOp
 from polyswarm.polymap import (
     PRECISION_M,
     Cell,
@@ -74,6 +73,7 @@ from polyswarm.polymap import (
     VectorType,
 )
 from polyswarm.polymap import UNITS_PER_M as POLYMAP_UNITS_PER_M
+from polyswarm.slam.follow import CorrectionOp
 from protocols.varint import decode_varints, encode_varints, unzigzag, zigzag
 
 FORMAT_VERSION = 1

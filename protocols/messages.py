@@ -24,8 +24,8 @@ import msgpack
 import numpy as np
 
 from polyswarm.errors import DecodeError
-from polyswarm.scan import LaserScan
-from polyswarm.sighting import SECTORS
+from polyswarm.frames.sighting import SECTORS
+from polyswarm.slam.scan import LaserScan
 from protocols.keys import NAME_RE
 
 PROTOCOL_VERSION = 1
@@ -287,7 +287,7 @@ class Pose(Message):
     map_version: int = 0
     blocked_by: str = ""  # a robot standing in this one's way (it should give way)
     frame: int = 0  # the last anchor applied (0: none)
-    # the latest scan's clear profile (``polyswarm.sighting``), sent while a robot of
+    # the latest scan's clear profile (``polyswarm.frames.sighting``), sent while a robot of
     # the swarm is in a frame of its own; b"": not sent
     clear: bytes = b""
     own: bool = False
@@ -459,7 +459,7 @@ MAX_PRIOR_MM = 10**8  # 100 km in millimetres
 @dataclass(frozen=True)
 class Priors(Message):
     """The coordinator to a robot: where the swarm's joint pose graph
-    (``polyswarm.jointgraph``) puts some of its keyframes. ``poses``: (keyframe id, x,
+    (``polyswarm.frames.jointgraph``) puts some of its keyframes. ``poses``: (keyframe id, x,
     y in millimetres, theta in 10 microradians) of the frame each keyframe's polygon is
     held at (as in a correction), ids ascending; ``sigma_m``, ``sigma_rad``: their
     standard deviations. They replace the robot's earlier priors; it holds them in its

@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from polyswarm.scan import LaserScan
 from polyswarm.se2 import wrap
+from polyswarm.slam.scan import LaserScan
 from protocols.messages import MAX_BEAMS, ProtocolError
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
@@ -103,7 +103,7 @@ def laserscan_from_msg(m) -> LaserScan:
     """A LaserScan message (CDR-decoded, or from a bag of either ROS) as a LaserScan.
 
     Beams may run clockwise (``angle_increment < 0``); invalid returns may read inf, NaN,
-    0 or beyond ``range_max``, as drivers emit them (``polyswarm.scan.classify`` sorts
+    0 or beyond ``range_max``, as drivers emit them (``polyswarm.slam.scan.classify`` sorts
     them out). ``time_increment`` is kept for de-skewing when it describes a sweep of at
     most ``MAX_SWEEP_S``; otherwise the beams count as taken at once."""
     try:

@@ -13,7 +13,7 @@ import shapely
 from shapely.geometry import LineString, Point, box
 
 from polyswarm.errors import SimulationError
-from polyswarm.occupancy import OccupancyGrid
+from polyswarm.grids.occupancy import OccupancyGrid
 
 WALL_THICKNESS_M = 0.2  # procedural walls: as thick as one pixel of the thesis maps
 WALL_HEIGHT_M = 1.0  # above every lidar mount

@@ -36,7 +36,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from polyswarm.config import SimConfig
 from polyswarm.errors import SimulationError
-from polyswarm.scan import LaserScan
+from polyswarm.slam.scan import LaserScan
 from sim.lidar import BeamSchedule, beam_angles, measure
 from sim.shapes import WALL_HEIGHT_M, World
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from polyswarm.scan import LaserScan
+from polyswarm.slam.scan import LaserScan
 
 CLEAR_M = 0.9  # turn away when anything is closer than this ahead
 AHEAD_RAD = 0.5  # half-width of the sector that must be clear

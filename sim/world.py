@@ -27,7 +27,7 @@ from shapely.geometry import Point
 from shapely.ops import nearest_points
 
 from polyswarm.errors import SimulationError
-from polyswarm.occupancy import OccupancyGrid
+from polyswarm.grids.occupancy import OccupancyGrid
 from sim.furnished import furnished_world
 from sim.shapes import (
     World,

@@ -48,7 +48,7 @@ def room_scan(t: float = 0.0):
     """A noise-free 270 degree scan from the centre of a 10 m square room (walls at
     x, y = +-5 m), facing +x."""
     from polyswarm.raycast import cast_rays
-    from polyswarm.scan import LaserScan
+    from polyswarm.slam.scan import LaserScan
 
     corners = np.array([(-5.0, -5.0), (5.0, -5.0), (5.0, 5.0), (-5.0, 5.0)])
     angles = np.linspace(-2.35, 2.35, 361)

@@ -95,7 +95,7 @@ def test_poses_carry_the_scans_clear_profile_when_a_robot_started_in_a_frame_of_
     audit it (``agents.anchoring``): at 1 Hz all along. A swarm whose starts were all
     given sends none."""
     from polyswarm.config import RobotEntry
-    from polyswarm.sighting import SECTORS
+    from polyswarm.frames.sighting import SECTORS
 
     cfg = replace(Config(), robots=(RobotEntry("r1", (0.0, 0.0, 0.0)), RobotEntry("r2")))
     sent = _profiles_sent(cfg, anchor_at=15)

@@ -9,10 +9,10 @@ import pytest
 import shapely
 
 from polyswarm.config import Config, RobotEntry, known_starts
-from polyswarm.mapmatch import transform_map
+from polyswarm.frames.mapmatch import transform_map
 from polyswarm.polymap import GridPolyMap, cells_digest
 from polyswarm.se2 import compose, inverse, relative, transform_points
-from polyswarm.slam import PolySlam
+from polyswarm.slam.polyslam import PolySlam
 
 
 def test_unknown_starts_leave_the_first_robot_at_the_origin():
@@ -222,7 +222,7 @@ def test_a_frame_that_puts_the_robot_where_another_saw_nothing_is_never_committe
 
     from agents.anchoring import Anchoring
     from agents.coordinator import Coordinator
-    from polyswarm.sighting import CLEAR_UNIT_M, SECTORS
+    from polyswarm.frames.sighting import CLEAR_UNIT_M, SECTORS
     from protocols.messages import Pose
     from tests.test_mapmatch import _seen
 
@@ -257,7 +257,7 @@ def test_a_candidate_frame_the_sightings_come_to_contradict_is_forgotten(caplog)
     no longer drawn there (it was drawn for minutes when only a new proposal replaced
     a candidate)."""
 
-    from polyswarm.sighting import CLEAR_UNIT_M, SECTORS
+    from polyswarm.frames.sighting import CLEAR_UNIT_M, SECTORS
 
     _, main, frames, solo = _r2_waiting()
     w = frames.waiting["r2"]
@@ -510,7 +510,13 @@ def test_a_match_proposes_the_image_of_the_frame_the_robots_saw_each_other_at():
     """A square room fits four ways; when the robots saw each other only where an image
     that did not score best puts them, the match proposes that image."""
     from agents.anchoring import _match
-    from polyswarm.mapmatch import MIN_SEEN, fitting_rivals, frame_error, match_maps, verdict_at
+    from polyswarm.frames.mapmatch import (
+        MIN_SEEN,
+        fitting_rivals,
+        frame_error,
+        match_maps,
+        verdict_at,
+    )
     from polyswarm.polymap import Ring, TypedPolygon, VectorType
 
     xy = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]])

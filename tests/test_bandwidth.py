@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from polyswarm.benchmarks import bandwidth as bw
-from polyswarm.gridmap import CountingGrid
-from polyswarm.occupancy import FREE, OCCUPIED, UNKNOWN
-from polyswarm.scan import LaserScan
+from polyswarm.grids.counting import CountingGrid
+from polyswarm.grids.occupancy import FREE, OCCUPIED, UNKNOWN
+from polyswarm.slam.scan import LaserScan
 
 RES = 0.05
 

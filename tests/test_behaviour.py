@@ -10,8 +10,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from agents.behaviour import MAX_RECOVERIES, RECOVER_BACK_M, Behaviour, Mode
-from polyswarm.control import ControlParams, PathFollower
 from polyswarm.errors import OffMapError
+from polyswarm.nav.control import ControlParams, PathFollower
 from protocols.messages import Assignment, AssignmentKind, RobotState
 
 

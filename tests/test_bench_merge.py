@@ -6,8 +6,8 @@ import numpy as np
 from shapely.geometry import box
 
 from polyswarm.benchmarks.merge import _pair_moments
+from polyswarm.frames.sighting import Sighting, Track
 from polyswarm.se2 import inverse, transform_points
-from polyswarm.sighting import Sighting, Track
 from tests.test_mapmatch import _seen
 from tests.test_sighting import profile_with_a_robot_at
 

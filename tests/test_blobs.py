@@ -1,4 +1,4 @@
-"""Isolated blobs of returns (polyswarm.scan.isolated_blobs) and ICP leaving them out.
+"""Isolated blobs of returns (polyswarm.slam.scan.isolated_blobs) and ICP leaving them out.
 
 Hand-checkable scenes: a lidar at the origin with 720 beams over 270 degrees, facing +x.
 """
@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from polyswarm.scan import LaserScan, isolated_blobs, scan_to_points
+from polyswarm.slam.scan import LaserScan, isolated_blobs, scan_to_points
 
 BEAMS = 720
 FOV = math.radians(270.0)
@@ -80,7 +80,7 @@ def test_a_robot_ahead_in_a_corridor_drags_icp_unless_left_out():
     only thing along the corridor and drags the pose back (to 0.3 m); left out as a blob,
     the corridor is degenerate and the odometry's 0.5 m holds."""
     from polyswarm.config import SlamConfig
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.polyslam import PolySlam
 
     got = {}
     for blobs_m in (0.55, 0.0):

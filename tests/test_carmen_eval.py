@@ -9,18 +9,12 @@ import numpy as np
 import pytest
 
 from polyswarm.errors import DataFormatError
-from polyswarm.evaluation import (
-    align_se2,
-    ate_rmse,
-    max_errors,
-    rpe,
-    time_to_coverage,
-    travelled,
-)
+from polyswarm.evaluation.coverage import time_to_coverage
+from polyswarm.evaluation.trajectory import align_se2, ate_rmse, max_errors, rpe, travelled
 from polyswarm.io.carmen import read_carmen, real_odometry
 from polyswarm.io.tum import read_tum, write_tum
-from polyswarm.odometry import IncrementNoise, noisy_odometry
 from polyswarm.se2 import compose, wrap
+from polyswarm.slam.odometry import IncrementNoise, noisy_odometry
 
 LOG = """# CARMEN Logfile
 PARAM robot_front_laser_max 30.0 nohost 0
@@ -133,7 +127,7 @@ def test_time_to_coverage_is_the_first_time_the_fraction_is_reached():
 
 
 def test_phantom_obstacles_are_the_length_of_walls_that_are_not_there():
-    from polyswarm.evaluation import phantom_obstacles, wall_distance
+    from polyswarm.evaluation.maps import phantom_obstacles, wall_distance
 
     room = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=float)
     ws, we = room, np.roll(room, -1, axis=0)
@@ -148,7 +142,7 @@ def test_phantom_obstacles_are_the_length_of_walls_that_are_not_there():
 def test_reachable_free_space_is_what_the_footprint_sweeps_less_the_noise_band():
     import shapely
 
-    from polyswarm.evaluation import coverage_tolerance, reachable_free
+    from polyswarm.evaluation.coverage import coverage_tolerance, reachable_free
 
     # a 4 x 4 m room, and through a 0.3 m gap a 1 x 1 m closet no 0.2 m robot enters
     room = shapely.box(0, 0, 4, 4)
@@ -215,7 +209,7 @@ def test_a_log_with_only_the_anchoring_odom_lines_has_no_real_odometry(tmp_path)
 def test_ghost_wall_share_on_walls_drawn_by_hand():
     import numpy as np
 
-    from polyswarm.evaluation import ghost_wall_share
+    from polyswarm.evaluation.maps import ghost_wall_share
 
     live_s = np.array([[0.0, 0.0], [0.0, 1.0]])
     live_e = np.array([[1.0, 0.0], [1.0, 1.0]])

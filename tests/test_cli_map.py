@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
+from polyswarm.grids.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from polyswarm.io.mapserver import write_map
-from polyswarm.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 
 
 def run(*args, check=True, cwd=None):

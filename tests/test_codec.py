@@ -303,7 +303,7 @@ def test_decoding_never_touches_an_existing_map():
 def test_golden_correction_vector_replays_to_its_cells():
     """A receiver that replayed the golden keyframe merges follows the golden correction
     to the cells its description lists (the atlas from the merges alone)."""
-    from polyswarm.follow import Atlas, replay_correction
+    from polyswarm.slam.follow import Atlas, replay_correction
     from protocols.golden.make_golden import golden_correction
     from protocols.mapcodec import decode_correction, encode_correction
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from polyswarm.control import ControlParams, Follow, PathFollower, _segment_clearance
+from polyswarm.nav.control import ControlParams, Follow, PathFollower, _segment_clearance
 
 
 def follower(path) -> PathFollower:

@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 import shapely
 
-from polyswarm.convert import (
+from polyswarm.data import WORLDS
+from polyswarm.errors import DataFormatError
+from polyswarm.grids.convert import (
     grid_to_polygons,
     grid_to_polymap,
     polymap_to_grid,
     round_trip_retention,
 )
-from polyswarm.data import WORLDS
-from polyswarm.errors import DataFormatError
+from polyswarm.grids.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from polyswarm.io.mapserver import read_map, write_map
-from polyswarm.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from polyswarm.polymap import VectorType
 
 U, Fr, Oc = UNKNOWN, FREE, OCCUPIED

@@ -16,7 +16,7 @@ from agents.coordinator import (
 )
 from polyswarm.config import Config
 from polyswarm.errors import DeltaGapError
-from polyswarm.explore import Strategy, assign
+from polyswarm.explore.assign import Strategy, assign
 from polyswarm.polymap import GridPolyMap, MergeOp, MergeOptions, VectorType, cells_digest
 from protocols.mapcodec import (
     decode_any_map,

@@ -193,8 +193,8 @@ def test_a_restarted_agent_keeps_its_odometry_scale(tmp_path, caplog):
     import json
 
     from agents import persist
-    from polyswarm.odomscale import OdometryScale
     from polyswarm.polymap import GridPolyMap
+    from polyswarm.slam.odomscale import OdometryScale
     from tests.conftest import F, O, rect
 
     learnt = OdometryScale()

@@ -1,4 +1,4 @@
-"""The map follows the pose graph (polyswarm.follow): moved keyframes' cells are merged
+"""The map follows the pose graph (polyswarm.slam.follow): moved keyframes' cells are merged
 again at the new poses, the rest stays bit for bit, and a receiver that holds the same
 keyframes follows a correction sent as poses, bit for bit, or refuses it."""
 
@@ -12,7 +12,8 @@ import shapely
 
 from polyswarm.config import Config
 from polyswarm.errors import DecodeError, DeltaGapError, PolyswarmError
-from polyswarm.follow import (
+from polyswarm.polymap import GridPolyMap, MergeOptions, cells_digest, snap_polygon
+from polyswarm.slam.follow import (
     Atlas,
     CorrectionOp,
     correct,
@@ -21,8 +22,7 @@ from polyswarm.follow import (
     quantize_pose,
     replay_correction,
 )
-from polyswarm.polymap import GridPolyMap, MergeOptions, cells_digest, snap_polygon
-from polyswarm.slam import PolySlam
+from polyswarm.slam.polyslam import PolySlam
 from protocols.mapcodec import decode_correction, encode_correction
 from tests.conftest import rect
 

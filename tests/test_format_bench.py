@@ -4,7 +4,7 @@ PolyMap and the 5 cm grid of the same scans describe the same room."""
 from __future__ import annotations
 
 from polyswarm.benchmarks.format import GRID_RESOLUTION_M, route_maps
-from polyswarm.occupancy import FREE, OCCUPIED
+from polyswarm.grids.occupancy import FREE, OCCUPIED
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon
 from tests.conftest import O
 

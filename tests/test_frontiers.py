@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from polyswarm.frontiers import extract_frontiers, split_polyline
-from polyswarm.navgraph import NavGraph
+from polyswarm.explore.frontiers import extract_frontiers, split_polyline
+from polyswarm.explore.targets import TargetCache, frontier_targets, sliver_frontiers
+from polyswarm.nav.navgraph import NavGraph
 from polyswarm.polymap import GridPolyMap
-from polyswarm.targets import TargetCache, frontier_targets, sliver_frontiers
 from tests.conftest import F, O, rect
 
 
@@ -52,9 +52,9 @@ def test_a_frontier_facing_a_sliver_of_unexplored_space_is_no_target():
 
 
 def test_cached_targets_are_those_computed_afresh_and_follow_map_changes(monkeypatch):
-    import polyswarm.targets
+    import polyswarm.explore.targets
 
-    monkeypatch.setattr(polyswarm.targets, "GAIN_WEIGHT", 1.0)  # the area is cached too
+    monkeypatch.setattr(polyswarm.explore.targets, "GAIN_WEIGHT", 1.0)  # the area is cached too
     # two rooms 12 m apart, each with an open side; the second room then grows
     left = rect(0.2, 0.2, 3.8, 3.8, (O, F, O, O))
     right = rect(14.2, 0.2, 17.8, 3.8, (O, O, O, F))
@@ -126,7 +126,7 @@ def _chains_by_search(starts: np.ndarray, ends: np.ndarray) -> list[list[int]]:
 
 
 def test_chain_vectors_follows_the_rule_with_shared_and_nearly_shared_points():
-    from polyswarm.frontiers import chain_vectors
+    from polyswarm.explore.frontiers import chain_vectors
 
     rng = np.random.default_rng(11)
     for _ in range(30):
@@ -142,7 +142,7 @@ def test_chain_vectors_follows_the_rule_with_shared_and_nearly_shared_points():
 
 
 def test_unexplored_area_behind_a_frontier():
-    from polyswarm.targets import GAIN_RADIUS_M, unexplored_behind
+    from polyswarm.explore.targets import GAIN_RADIUS_M, unexplored_behind
 
     half_disc = 0.5 * np.pi * GAIN_RADIUS_M**2
     # a room whose top is open onto unexplored space: a whole half disc behind it

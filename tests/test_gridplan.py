@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from polyswarm.gridplan import grid_astar, grid_mcp, inflated
-from polyswarm.occupancy import FREE, OCCUPIED, OccupancyGrid
+from polyswarm.grids.occupancy import FREE, OCCUPIED, OccupancyGrid
+from polyswarm.nav.gridplan import grid_astar, grid_mcp, inflated
 
 
 def length(cells) -> float:

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from polyswarm.config import IcpConfig
-from polyswarm.icp import PointToVectorIcp, VectorIndex, cull_backfaces
 from polyswarm.raycast import cast_rays
+from polyswarm.slam.icp import PointToVectorIcp, VectorIndex, cull_backfaces
 
 ANGLES = np.linspace(-2.35, 2.35, 720)
 

@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 
-from polyswarm.follow import pose_of
-from polyswarm.jointgraph import JointGraph, KeyframeLedger, match_keyframe, moved_m
+from polyswarm.frames.jointgraph import JointGraph, KeyframeLedger, match_keyframe, moved_m
 from polyswarm.polymap import Ring, TypedPolygon, VectorType
-from polyswarm.posegraph import PoseGraph
 from polyswarm.se2 import compose, inverse, transform_points
+from polyswarm.slam.follow import pose_of
+from polyswarm.slam.posegraph import PoseGraph
 
 OFF = (0.25, -0.1, math.radians(1.0))  # where r2 placed the rooms, in the map frame
 
@@ -137,7 +137,7 @@ def test_two_simulated_robots_correct_the_one_placed_off_through_the_wire():
     from agents.coordinator import Coordinator
     from polyswarm.config import Config
     from polyswarm.polymap import cells_digest
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.polyslam import PolySlam
     from protocols.mapcodec import encode_updates
     from protocols.messages import MAP_KIND_OF, Priors, decode, encode
     from sim import Simulation, load_world
@@ -170,7 +170,7 @@ def test_two_simulated_robots_correct_the_one_placed_off_through_the_wire():
         ledgers = {rid: coord.robot(rid).ledger.snapshot() for rid in ("r1", "r2")}
         assert joint.find_edges(ledgers) > 0
         solved = joint.solve(ledgers, "r1")
-        from polyswarm.follow import quantize_pose
+        from polyswarm.slam.follow import quantize_pose
 
         q = tuple((k, *quantize_pose(p)) for k, p in sorted(solved["r2"].items()))
         _, msg = decode(encode(Priors(0, 0.05, 0.01, q), "coordinator", 0, 0.0), Priors)

@@ -11,7 +11,7 @@ import shapely
 import shapely.affinity
 from shapely.geometry import box
 
-from polyswarm.mapmatch import (
+from polyswarm.frames.mapmatch import (
     MIN_SEEN,
     FrameEstimate,
     MapMatch,
@@ -93,7 +93,7 @@ def test_a_moved_part_of_the_building_is_found_where_it_is(pose):
 def test_clear_space_is_what_lies_deeper_than_clear_m_inside_the_explored_space():
     """On a room turned 30 degrees (no wall along the raster), the cells counted clear
     are exactly those whose centres lie more than CLEAR_M inside: none nearer a wall."""
-    from polyswarm.mapmatch import CLEAR_M, RESOLUTION_M, _view
+    from polyswarm.frames.mapmatch import CLEAR_M, RESOLUTION_M, _view
 
     room = shapely.affinity.rotate(box(0, 0, 4, 3), 30, origin=(0, 0))
     v = _view(GridPolyMap.from_polygons(_typed(room, room.boundary), CELL_M))
@@ -238,7 +238,7 @@ def test_a_pose_refused_only_for_slight_conflicts_is_proposed(conflicts, overlap
     """A map bent by drift conflicts with the other by a per cent or two at the right
     frame: refused, but proposed for sightings to confirm. More conflicts, or another
     reason to refuse, and it is not."""
-    from polyswarm.mapmatch import _decide
+    from polyswarm.frames.mapmatch import _decide
 
     m = _decide([(np.zeros(3), _ev(conflicts, overlap_m2))], candidates=1)
     assert m.accepted == (conflicts <= 0.01 and overlap_m2 >= 10.0)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from shapely.geometry import box
 
-from polyswarm.mapmatch import _view, frame_error
-from polyswarm.mapsearch import HEADING_STEP_RAD, PEAKS, search, search_fine
+from polyswarm.frames.mapmatch import _view, frame_error
+from polyswarm.frames.mapsearch import HEADING_STEP_RAD, PEAKS, search, search_fine
 from tests.test_mapmatch import _seen
 
 

@@ -1,4 +1,4 @@
-"""Standpoints of a robot waiting for its frame (``polyswarm.meeting``), on an L-shaped
+"""Standpoints of a robot waiting for its frame (``polyswarm.frames.meeting``), on an L-shaped
 flat checkable by hand, and the solo coordinator's tour (``agents.meeting``)."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import math
 import numpy as np
 import shapely
 
-from polyswarm.meeting import MEET_NEAR_M, countable, standpoints
+from polyswarm.frames.meeting import MEET_NEAR_M, countable, standpoints
+from polyswarm.frames.sighting import BODY_M, SEEN_APART_M, WALL_CLEAR_M
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
-from polyswarm.sighting import BODY_M, SEEN_APART_M, WALL_CLEAR_M
 
 # an L: a 10 m x 4 m arm along x, and a 4 m x 8 m arm up from its right end
 L_FLAT = np.array([(0, 0), (10, 0), (10, 8), (6, 8), (6, 4), (0, 4)], dtype=float)
@@ -53,7 +53,7 @@ def test_standpoints_are_in_sight_within_reach_and_off_the_walls():
 
 
 def test_standpoints_are_where_the_other_robots_sighting_counts():
-    """The sighting test (``polyswarm.sighting.seen_where``) wants the return and a robot's
+    """The sighting test (``polyswarm.frames.sighting.seen_where``) wants the return and a robot's
     width behind it WALL_CLEAR_M from walls: every standpoint keeps its line of sight
     from BODY_M before it to 2 BODY_M past it that far from the flat's walls."""
     pts = standpoints(_flat(), OTHER, [], reach_m=6.0, wall_m=0.35)

@@ -14,8 +14,8 @@ import numpy as np
 from agents.coordinator import Coordinator
 from agents.merger import MergeProcess
 from polyswarm.config import Config
-from polyswarm.navgraph import NavGraph
-from polyswarm.targets import map_facts
+from polyswarm.explore.targets import map_facts
+from polyswarm.nav.navgraph import NavGraph
 from protocols.messages import Pose
 from tests.test_replay import RECTS, ops_of, same, shifted
 

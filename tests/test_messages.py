@@ -289,7 +289,7 @@ def test_priors_travel_whole_and_bad_ones_are_refused():
 
 
 def test_a_poses_clear_profile_travels_whole_or_is_refused():
-    from polyswarm.sighting import SECTORS
+    from polyswarm.frames.sighting import SECTORS
     from protocols.messages import Pose
 
     prof = bytes(range(SECTORS))

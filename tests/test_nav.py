@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from polyswarm.errors import PlanningError
-from polyswarm.navgraph import BUFFER_SEGMENTS, NavGraph, grown_radius
-from polyswarm.planner import Planner, path_clearance
+from polyswarm.nav.navgraph import BUFFER_SEGMENTS, NavGraph, grown_radius
+from polyswarm.nav.planner import Planner, path_clearance
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
 from protocols.mapcodec import decode_map
 from tests.conftest import O
@@ -151,7 +151,7 @@ def test_every_path_keeps_the_radius_from_every_obstacle(room, seed):
 
 
 def test_graph_index_weights_are_path_lengths_through_the_portals():
-    from polyswarm.explore import GraphIndex
+    from polyswarm.explore.assign import GraphIndex
 
     # an L-shaped corridor: several pieces and cells, so internal and border edges
     ring = Ring([(0.1, 0.1), (5.9, 0.1), (5.9, 1.9), (1.9, 1.9), (1.9, 5.9), (0.1, 5.9)], [O] * 6)
@@ -281,7 +281,7 @@ def test_the_shortest_path_in_a_polygon_never_leaves_it():
     """Random star-shaped polygons (many thin triangles): the path between two inside
     points stays inside. Portals oriented by the centroids' direction put 1 path in 400
     straight through the polygon's boundary (on a PolySLAM office map: four walls)."""
-    from polyswarm.planner import _channel
+    from polyswarm.nav.planner import _channel
 
     rng = np.random.default_rng(1)
     tried = 0
@@ -310,7 +310,7 @@ def test_the_shortest_path_in_a_polygon_never_leaves_it():
 def test_the_fallback_path_keeps_only_the_corners_it_needs_and_stays_inside():
     """Portal midpoints through an L-shaped corridor, shortcut: the corner remains, the
     points a straight segment can skip go."""
-    from polyswarm.planner import _shortcut
+    from polyswarm.nav.planner import _shortcut
 
     corridor = shapely.Polygon([(0, 0), (10, 0), (10, 10), (8, 10), (8, 2), (0, 2)])
     mids = np.array([(1, 1), (3, 1), (5, 1), (7, 1), (9, 1), (9, 3), (9, 5), (9, 9)], float)

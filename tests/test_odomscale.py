@@ -1,4 +1,4 @@
-"""The odometry's distance scale learnt from keyframe pairs (polyswarm.odomscale)."""
+"""The odometry's distance scale learnt from keyframe pairs (polyswarm.slam.odomscale)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from polyswarm.config import Config, with_overrides
-from polyswarm.odomscale import PLAUSIBLE, OdometryScale
+from polyswarm.slam.odomscale import PLAUSIBLE, OdometryScale
 
 
 def _steps(rng, n, scale, noise_m):

@@ -429,7 +429,7 @@ def test_a_keyframe_whose_ring_collapses_on_a_cell_border_merges():
     # a noise-free scan of a square room from its centre, refined: GEOS's fast rectangle
     # clip raised "Invalid number of points in LinearRing" on one of its cells
     from polyswarm.config import Config
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.polyslam import PolySlam
     from tests.conftest import room_scan
 
     slam = PolySlam(Config().slam)
@@ -442,7 +442,7 @@ def test_a_geos_error_left_in_the_merge_is_a_geometry_error_and_slam_goes_on(mon
     from polyswarm.config import Config
     from polyswarm.errors import GeometryError
     from polyswarm.polymap import GridPolyMap as Map
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.polyslam import PolySlam
     from tests.conftest import room_scan
 
     def fail(*args, **kwargs):

@@ -11,12 +11,12 @@ import shapely
 
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
-from polyswarm.loopsearch import correlative_search
 from polyswarm.polymap import Ring, TypedPolygon
-from polyswarm.posegraph import PoseGraph
 from polyswarm.se2 import compose, relative
-from polyswarm.slam import PolySlam
-from polyswarm.submap import KeyframeStore
+from polyswarm.slam.loopsearch import correlative_search
+from polyswarm.slam.polyslam import PolySlam
+from polyswarm.slam.posegraph import PoseGraph
+from polyswarm.slam.submap import KeyframeStore
 from tests.conftest import O, rect
 from tests.test_icp import room, scan_at
 
@@ -118,7 +118,7 @@ def test_wide_search_in_a_corridor_is_ambiguous():
 def test_slam_trajectory_follows_loop_corrections():
     """Drive round a room twice with odometry that turns too much: the second lap closes
     loops against the first, and trajectory() gives every scan a corrected pose."""
-    from polyswarm.scan import LaserScan
+    from polyswarm.slam.scan import LaserScan
 
     s, e = room()
     cfg = Config()

@@ -6,10 +6,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from polyswarm.keyframe import keyframe_polygon
 from polyswarm.polymap import GridPolyMap, VectorType
 from polyswarm.raycast import cast_rays
-from polyswarm.scan import NO_RETURN_SHARE, LaserScan, scan_to_points
+from polyswarm.slam.keyframe import keyframe_polygon
+from polyswarm.slam.scan import NO_RETURN_SHARE, LaserScan, scan_to_points
 
 # a 4 m x 4 m room, walls as segments
 ROOM = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=float)
@@ -121,7 +121,7 @@ def test_a_lidar_mounted_backwards_keeps_its_fan_in_one_piece():
 def test_deskewing_puts_a_turning_robots_sweep_back_in_one_frame():
     """A 360 beam, 5 Hz sweep in a 4 m room while turning at 1 rad/s: the raw beams smear
     0.2 rad; moved with the robot's motion per beam they fall on the walls again."""
-    from polyswarm.scan import deskew_motion
+    from polyswarm.slam.scan import deskew_motion
 
     n, w, sweep = 360, 1.0, 0.2
     dt = sweep / n

@@ -11,11 +11,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from polyswarm.config import RefineConfig
-from polyswarm.keyframe import keyframe_polygon
 from polyswarm.polymap import Ring, TypedPolygon
 from polyswarm.raycast import cast_rays
-from polyswarm.refine import fit_chain, fit_first_line, refine_polygon, refine_ring
-from polyswarm.scan import LaserScan, scan_to_points
+from polyswarm.slam.keyframe import keyframe_polygon
+from polyswarm.slam.refine import fit_chain, fit_first_line, refine_polygon, refine_ring
+from polyswarm.slam.scan import LaserScan, scan_to_points
 from tests.conftest import F, O
 
 CFG = RefineConfig()

@@ -14,8 +14,8 @@ from agents.coordinator import Coordinator
 from agents.replay import ReplayPool, apply_update
 from polyswarm.config import Config
 from polyswarm.errors import DeltaGapError, MapError
-from polyswarm.follow import Atlas
 from polyswarm.polymap import GridPolyMap, MergeOp, MergeOptions, cells_digest
+from polyswarm.slam.follow import Atlas
 from protocols.messages import Pose
 from tests.conftest import F, O, rect
 

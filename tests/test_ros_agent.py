@@ -14,10 +14,10 @@ import shapely
 from agents.robot import run_agent
 from agents.session import SessionSpec, open_session
 from polyswarm.config import AgentIoConfig, Config
-from polyswarm.odometry import IncrementNoise, noisy_odometry
 from polyswarm.runners.replay import LogPlayer, start_player
-from polyswarm.scan import LaserScan
-from polyswarm.slam import PolySlam
+from polyswarm.slam.odometry import IncrementNoise, noisy_odometry
+from polyswarm.slam.polyslam import PolySlam
+from polyswarm.slam.scan import LaserScan
 from protocols import ros
 from protocols.keys import SwarmKeys
 from protocols.messages import ProtocolError

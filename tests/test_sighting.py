@@ -8,11 +8,9 @@ import numpy as np
 import shapely
 from shapely.geometry import box
 
-from polyswarm.mapmatch import PEAKS, frame_error, match_maps, transform_map
-from polyswarm.mapsearch import search as coarse_to_fine
-from polyswarm.polymap import GridPolyMap
-from polyswarm.se2 import compose, inverse, transform_points
-from polyswarm.sighting import (
+from polyswarm.frames.mapmatch import PEAKS, frame_error, match_maps, transform_map
+from polyswarm.frames.mapsearch import search as coarse_to_fine
+from polyswarm.frames.sighting import (
     CLEAR_UNIT_M,
     MIN_CONTRADICTIONS,
     SECTORS,
@@ -30,6 +28,8 @@ from polyswarm.sighting import (
     seen_where,
     unseen,
 )
+from polyswarm.polymap import GridPolyMap
+from polyswarm.se2 import compose, inverse, transform_points
 from tests.test_mapmatch import CELL_M, _typed
 
 ROBOT_RADIUS_M = 0.2
@@ -142,7 +142,7 @@ def test_along_a_corridor_only_where_a_robot_can_stand_is_looked_at():
 def profile_with_a_robot_at(xy, clear_m: float = 10.0) -> bytes:
     """A clear profile: clear to ``clear_m`` all around, and a robot's body at ``xy``
     (metres, the viewer's frame)."""
-    from polyswarm.sighting import BODY_M, _sector
+    from polyswarm.frames.sighting import BODY_M, _sector
 
     out = [int(clear_m / CLEAR_UNIT_M)] * SECTORS
     d = float(np.hypot(*xy)) - BODY_M / 2
@@ -359,7 +359,7 @@ def test_a_frame_is_refused_while_an_image_of_it_under_a_symmetry_of_a_map_is_po
     """A has mapped the whole ring: it fits itself after every quarter turn, so B fits A
     at each image of the true frame, however little B has seen. The frame stands only
     once every image is ruled out (here by sightings)."""
-    from polyswarm.mapmatch import _symmetric_images, _view
+    from polyswarm.frames.mapmatch import _symmetric_images, _view
 
     whole = GridPolyMap.from_polygons(_typed(RING, RING.boundary), CELL_M)
     part = GridPolyMap.from_polygons(
@@ -379,8 +379,8 @@ def test_a_frame_is_refused_while_an_image_of_it_under_a_symmetry_of_a_map_is_po
 
 
 def test_poses_from_before_a_large_correction_are_forgotten():
-    from polyswarm.follow import CorrectionOp, largest_move_m
-    from polyswarm.sighting import SIGHTING_SLACK_M
+    from polyswarm.frames.sighting import SIGHTING_SLACK_M
+    from polyswarm.slam.follow import CorrectionOp, largest_move_m
 
     # keyframe 3 moved 30 mm and 4 turned 0.1 rad (counted 0.5 m at 5 m): the largest
     op = CorrectionOp(2.0, 7, 8, ((3, (30, -40, 0)), (4, (0, 0, 10_000))), 0)

@@ -7,12 +7,12 @@ import pytest
 
 from polyswarm.config import Config, with_overrides
 from polyswarm.errors import PlanningError
-from polyswarm.evaluation import map_iou
-from polyswarm.navgraph import NavGraph
-from polyswarm.planner import Planner
+from polyswarm.evaluation.maps import map_iou
+from polyswarm.nav.navgraph import NavGraph
+from polyswarm.nav.planner import Planner
 from polyswarm.polymap import GridPolyMap, cells_digest
 from polyswarm.runners.slam import metrics, run_world
-from polyswarm.slam import KeyframeSelector, PolySlam
+from polyswarm.slam.polyslam import KeyframeSelector, PolySlam
 from protocols.mapcodec import decode_merge, encode_merge
 from sim import Simulation, load_world, spread_start_poses
 
@@ -138,7 +138,7 @@ def test_slam_on_csails_real_wheel_odometry_stays_on_the_reference(shared_data):
     """csail's real odometry is off by 15-30 degrees over some fast turns; ICP from such a
     prediction fell into a wrong minimum and the run ended 6.5 m off (ATE). A correlative
     search seeds ICP again after a poor fit."""
-    from polyswarm.evaluation import ate_rmse
+    from polyswarm.evaluation.trajectory import ate_rmse
     from polyswarm.runners.slam import OdometrySource, run_log
 
     run = run_log(

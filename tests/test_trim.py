@@ -1,15 +1,15 @@
-"""Trimming a keyframe to what can change the map (polyswarm.trim), on rooms you can draw."""
+"""Trimming a keyframe to what can change the map (polyswarm.slam.trim), on rooms you can draw."""
 
 import numpy as np
 import shapely
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from polyswarm.keyframe import keyframe_polygon
 from polyswarm.polymap import GridPolyMap, MergeOptions, Ring, TypedPolygon, VectorType
 from polyswarm.raycast import cast_rays
-from polyswarm.scan import LaserScan, scan_to_points
-from polyswarm.trim import trim_keyframe
+from polyswarm.slam.keyframe import keyframe_polygon
+from polyswarm.slam.scan import LaserScan, scan_to_points
+from polyswarm.slam.trim import trim_keyframe
 
 O, F = VectorType.OBSTACLE, VectorType.FRONTIER
 OPTS = MergeOptions(

@@ -1,7 +1,7 @@
 """``polyswarm bench bandwidth``: PolyMap deltas against occupancy-grid map sharing.
 
 The same noisy scans and SLAM poses go into PolySLAM and into a 5 cm grid built as
-gmapping builds it (``polyswarm.gridmap``, ray casting; never ground truth). At every
+gmapping builds it (``polyswarm.grids.counting``, ray casting; never ground truth). At every
 keyframe, where PolySLAM emits a map delta, each scheme's message for that update is
 measured:
 
@@ -41,10 +41,10 @@ import numpy as np
 
 from polyswarm.config import Config
 from polyswarm.errors import DeltaGapError
-from polyswarm.follow import Atlas, CorrectionOp, replay_correction
-from polyswarm.gridmap import CountingGrid
+from polyswarm.grids.counting import CountingGrid
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, cells_digest
-from polyswarm.scan import LaserScan
+from polyswarm.slam.follow import Atlas, CorrectionOp, replay_correction
+from polyswarm.slam.scan import LaserScan
 
 SCHEMES = (
     "polymap_delta",
@@ -322,8 +322,8 @@ def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) 
 def record_log(path: Path, cfg: Config, seed: int = 0) -> Recording:
     """PolySLAM over a CARMEN log with the default noisy odometry."""
     from polyswarm.io.carmen import read_carmen
-    from polyswarm.odometry import IncrementNoise, noisy_odometry
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.odometry import IncrementNoise, noisy_odometry
+    from polyswarm.slam.polyslam import PolySlam
 
     log = read_carmen(path)
     ref = log.reference

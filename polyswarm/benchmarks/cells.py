@@ -18,8 +18,8 @@ from polyswarm.config import Config
 
 def run(log_path: Path, sizes_m: list[float], seed: int = 0) -> dict:
     from polyswarm.io.carmen import read_carmen
-    from polyswarm.odometry import IncrementNoise, noisy_odometry
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.odometry import IncrementNoise, noisy_odometry
+    from polyswarm.slam.polyslam import PolySlam
     from protocols.mapcodec import encode_delta, encode_map
 
     log = read_carmen(log_path)

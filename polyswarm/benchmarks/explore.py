@@ -3,7 +3,7 @@
 1. Explorations: ``polyswarm launch`` (every part its own process, Zenoh on loopback)
    per world x robot count x strategy x seed, with a robot profile
    (``polyswarm.profiles``); t99 (simulated seconds to 99 % of the free space the
-   robots' footprint reaches, ``polyswarm.evaluation.reachable_free``), collisions,
+   robots' footprint reaches, ``polyswarm.evaluation.coverage.reachable_free``), collisions,
    crashed processes, merged-map IoU and the reachable area left unexplored. Each is
    compared with the idealised reference (``polyswarm.benchmarks.reference``) run for
    the same world, robot count, start, sensor range, field of view, speed and radius:
@@ -161,7 +161,7 @@ def reference_t99(spec: RunSpec) -> float | None:
     """The reference's t99 for a run's world, robots, profile and start (cached)."""
     from polyswarm.benchmarks.reference import reference_run
     from polyswarm.config import Config, with_profile
-    from polyswarm.evaluation import coverage_tolerance
+    from polyswarm.evaluation.coverage import coverage_tolerance
     from sim import load_world, spread_start_poses
 
     cfg = with_profile(Config(), spec.profile)

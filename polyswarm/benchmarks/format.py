@@ -10,16 +10,16 @@ import numpy as np
 import shapely
 
 from polyswarm.config import Config
-from polyswarm.convert import grid_to_polymap, polymap_to_grid, round_trip_retention
 from polyswarm.data import WORLDS, world_yaml
-from polyswarm.gridmap import CountingGrid
+from polyswarm.grids.convert import grid_to_polymap, polymap_to_grid, round_trip_retention
+from polyswarm.grids.counting import CountingGrid
+from polyswarm.grids.occupancy import OccupancyGrid
 from polyswarm.io.mapserver import grid_png_bytes, read_map
-from polyswarm.keyframe import keyframe_polygon
-from polyswarm.occupancy import OccupancyGrid
 from polyswarm.polymap import GridPolyMap, VectorType
 from polyswarm.raycast import cast_rays
-from polyswarm.refine import refine_polygon
-from polyswarm.scan import LaserScan, scan_to_points
+from polyswarm.slam.keyframe import keyframe_polygon
+from polyswarm.slam.refine import refine_polygon
+from polyswarm.slam.scan import LaserScan, scan_to_points
 from protocols.mapcodec import encode_map
 
 GRID_RESOLUTION_M = 0.05  # the thesis compares maps on a 5 cm grid (chapter 5.4)

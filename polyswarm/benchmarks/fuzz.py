@@ -40,7 +40,7 @@ def _mutate(rng: random.Random, data: bytes) -> bytes:
 
 def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
     """Decoder and valid seeds per kind of outside data."""
-    from polyswarm.scan import LaserScan
+    from polyswarm.slam.scan import LaserScan
     from protocols import rmw_zenoh, ros
     from protocols.golden.make_golden import golden_maps, golden_messages
     from protocols.mapcodec import (
@@ -81,7 +81,7 @@ def decoders() -> dict[str, tuple[Callable[[bytes], object], list[bytes]]]:
 
 def _long_correction() -> bytes:
     """A correction long enough to go compressed ("bz")."""
-    from polyswarm.follow import CorrectionOp
+    from polyswarm.slam.follow import CorrectionOp
     from protocols.mapcodec import encode_correction
 
     moves = tuple((k, (30 + k % 5, -12, 90)) for k in range(0, 120, 3))

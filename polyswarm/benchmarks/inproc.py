@@ -15,10 +15,10 @@ import numpy as np
 
 from polyswarm.config import Config, RobotEntry
 from polyswarm.errors import MapError
-from polyswarm.evaluation import coverage_tolerance, reachable_free
-from polyswarm.follow import CorrectionOp
+from polyswarm.evaluation.coverage import coverage_tolerance, reachable_free
 from polyswarm.polymap import MapDelta, MergeOp
-from polyswarm.scan import LaserScan
+from polyswarm.slam.follow import CorrectionOp
+from polyswarm.slam.scan import LaserScan
 
 # (robot id, simulated time s, scan, SLAM pose (x, y, theta), the robot's map delta, the
 # same change as the merge that made it or None, and the correction before it or None)

@@ -27,8 +27,8 @@ def run_log(path: Path, max_keyframes: int | None = None) -> dict:
     from polyswarm.config import Config
     from polyswarm.errors import DataFormatError
     from polyswarm.io.carmen import read_carmen, real_odometry
-    from polyswarm.odometry import IncrementNoise, noisy_odometry
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.odometry import IncrementNoise, noisy_odometry
+    from polyswarm.slam.polyslam import PolySlam
 
     log = read_carmen(path)
     try:

@@ -44,9 +44,9 @@ def _snapshots(world: str, seed: int, robots: int, cfg) -> tuple[list, list, lis
     """(moments [(t s, [robot maps in their own frames])], true starts, each robot's
     track of poses and clear profiles in its own frame)."""
     from polyswarm.benchmarks.inproc import explore_in_process
-    from polyswarm.mapmatch import transform_map
+    from polyswarm.frames.mapmatch import transform_map
+    from polyswarm.frames.sighting import Sighting, Track
     from polyswarm.se2 import compose, inverse
-    from polyswarm.sighting import Sighting, Track
     from sim import load_world, scattered_start_poses
 
     starts = scattered_start_poses(
@@ -95,7 +95,7 @@ def _true_overlap(a, b, pose) -> float:
 
 
 def _score(est, truth) -> dict:
-    from polyswarm.mapmatch import frame_error
+    from polyswarm.frames.mapmatch import frame_error
 
     if est is None:
         return {"err_m": None, "err_deg": None, "correct": False, "wrong": False}
@@ -111,8 +111,8 @@ def _score(est, truth) -> dict:
 def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> list[dict]:
     """Both methods on robot 1's and robot k's maps at every moment."""
     from polyswarm.benchmarks.gridmerge import Features, match_grids
-    from polyswarm.mapmatch import MIN_OVERLAP_M2, FrameEstimate, MatchError, match_maps
-    from polyswarm.sighting import (
+    from polyswarm.frames.mapmatch import MIN_OVERLAP_M2, FrameEstimate, MatchError, match_maps
+    from polyswarm.frames.sighting import (
         MIN_CONTRADICTIONS,
         Room,
         contradictions,

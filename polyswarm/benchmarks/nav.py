@@ -1,7 +1,7 @@
 """``polyswarm bench nav``: PolyMap navigation against shortest paths on the grid.
 
 The baseline is scikit-image's compiled minimum-cost-path search on the inflated grid
-(``polyswarm.gridplan.grid_mcp``) at 5 cm and at the map's own resolution (0.2 m for
+(``polyswarm.nav.gridplan.grid_mcp``) at 5 cm and at the map's own resolution (0.2 m for
 the thesis worlds); the pure-Python A* of earlier benches is still timed beside it."""
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ import numpy as np
 from scipy import ndimage
 
 from polyswarm.config import Config
-from polyswarm.convert import grid_to_polymap, polymap_to_grid
 from polyswarm.data import WORLDS, world_yaml
 from polyswarm.errors import PlanningError
-from polyswarm.gridplan import cells_to_points, grid_astar, grid_mcp, inflated
+from polyswarm.grids.convert import grid_to_polymap, polymap_to_grid
 from polyswarm.io.mapserver import read_map
-from polyswarm.navgraph import NavGraph
-from polyswarm.planner import Planner, path_clearance
+from polyswarm.nav.gridplan import cells_to_points, grid_astar, grid_mcp, inflated
+from polyswarm.nav.navgraph import NavGraph
+from polyswarm.nav.planner import Planner, path_clearance
 
 GRID_M = 0.05  # the thesis compares on a 5 cm grid
 
@@ -124,7 +124,7 @@ def compare(
 def update_times(world: str = "office", seed: int = 0, radius: float = 0.25) -> np.ndarray:
     """Graph update time after every keyframe delta of a simulated PolySLAM run."""
     from polyswarm.runners.slam import run_world
-    from polyswarm.slam import PolySlam
+    from polyswarm.slam.polyslam import PolySlam
 
     maps = []
     orig = PolySlam.process

@@ -4,7 +4,7 @@
 localisation and motion, point robots on the inflated free grid, a ray-cast sensor) is
 loaded as a module, given the profile's range, field of view, speed and radius and our
 robot 0's start, and scored with the same coverage definition as our runs
-(``polyswarm.evaluation.reachable_free``: its ground truth is the free space within the
+(``polyswarm.evaluation.coverage.reachable_free``: its ground truth is the free space within the
 robot's radius of its reachable cells already; the band of ``coverage_tolerance`` along
 obstacles is taken off it too). Procedural worlds are rasterised to map_server files at
 ``RASTER_M`` first. Results are cached on disk: the reference is deterministic.
@@ -28,7 +28,7 @@ import shapely
 from polyswarm.config import Config
 from polyswarm.data import shared_data_dir
 from polyswarm.errors import DataFormatError
-from polyswarm.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from polyswarm.grids.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 
 log = logging.getLogger(__name__)
 

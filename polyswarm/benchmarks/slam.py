@@ -17,18 +17,18 @@ import shapely
 from polyswarm.config import Config, RefineConfig, with_overrides
 from polyswarm.data import WORLDS, log_paths
 from polyswarm.errors import DataFormatError
-from polyswarm.odometry import IncrementNoise
-from polyswarm.refine import refine_polygon
 from polyswarm.runners.slam import OdometrySource, metrics, run_log, run_world, stage_percentiles
+from polyswarm.slam.odometry import IncrementNoise
+from polyswarm.slam.refine import refine_polygon
 
 THESIS_MAX_ERROR_RATIO = {"loop": 0.0043, "cross": 0.0016, "zigzag": 0.00074, "maze": 0.00062}
 THESIS_POLYGONS = {"loop": 209585, "cross": 429876, "zigzag": 469110}  # Table 5.8, no overlay
 
 
 def _curves_keyframe(seed: int):
-    from polyswarm.keyframe import keyframe_polygon
     from polyswarm.raycast import cast_rays
-    from polyswarm.scan import LaserScan, scan_to_points
+    from polyswarm.slam.keyframe import keyframe_polygon
+    from polyswarm.slam.scan import LaserScan, scan_to_points
     from sim.world import load_world
 
     world = load_world("curves")

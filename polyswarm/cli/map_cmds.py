@@ -39,7 +39,7 @@ def convert(
     """Convert an occupancy grid map to a PolyMap (thesis Algorithm 1, plus diagonals)."""
     from rich.console import Console
 
-    from polyswarm.convert import grid_to_polymap
+    from polyswarm.grids.convert import grid_to_polymap
     from protocols.files import write_polymap
 
     grid = _load_grid(source, resolution)

@@ -46,8 +46,8 @@ def slam_cmd(
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.table import Table
 
-    from polyswarm.odometry import IncrementNoise
     from polyswarm.runners import slam as runner
+    from polyswarm.slam.odometry import IncrementNoise
     from protocols.bags import is_bag
 
     if (log is None) == (world is None):
@@ -157,7 +157,7 @@ def scan_cmd(
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from polyswarm.scan import beam_angles, classify
+    from polyswarm.slam.scan import beam_angles, classify
     from protocols.bags import choose_mount, read_bag
 
     cfg = load_cfg(config, None)

@@ -315,7 +315,7 @@ def launch_cmd(
     from rich.live import Live
     from rich.table import Table
 
-    from polyswarm.explore import Strategy
+    from polyswarm.explore.assign import Strategy
     from polyswarm.runners.launch import Fault, LaunchOptions, launch
 
     try:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from polyswarm.errors import DataFormatError
-from polyswarm.scan import LaserScan
+from polyswarm.slam.scan import LaserScan
 
 SYNTH_PERIOD_S = 1.0  # the logs keep only the scans a grid SLAM used: about 1 per second
 DEFAULT_FOV_DEG = 180.0

@@ -49,7 +49,7 @@ def export_map(
     elif suffix == ".geojson":
         path.write_text(json.dumps(to_geojson(pmap)))
     elif suffix == ".yaml":
-        from polyswarm.convert import polymap_to_grid
+        from polyswarm.grids.convert import polymap_to_grid
         from polyswarm.io.mapserver import write_map
 
         write_map(polymap_to_grid(pmap, grid_resolution_m, wall_thickness_m=wall_thickness_m), path)

@@ -15,7 +15,7 @@ import yaml
 from PIL import Image, UnidentifiedImageError
 
 from polyswarm.errors import DataFormatError
-from polyswarm.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from polyswarm.grids.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 
 log = logging.getLogger(__name__)
 

@@ -89,7 +89,7 @@ class MergeOp:
     options: MergeOptions
     digest: int
     # the keyframe it came from (its pose-graph node id): a map that follows the pose
-    # graph moves the polygon later (polyswarm.follow), by this id. None: a merge only
+    # graph moves the polygon later (polyswarm.slam.follow), by this id. None: a merge only
     keyframe: int | None = None
 
 

@@ -42,14 +42,9 @@ from polyswarm.config import (
     with_overrides,
 )
 from polyswarm.errors import ConfigError, DecodeError, MapError, PolyswarmError
-from polyswarm.evaluation import (
-    coverage_tolerance,
-    map_iou,
-    phantom_obstacles,
-    reachable_free,
-    time_to_coverage,
-)
-from polyswarm.mapmatch import frame_error
+from polyswarm.evaluation.coverage import coverage_tolerance, reachable_free, time_to_coverage
+from polyswarm.evaluation.maps import map_iou, phantom_obstacles
+from polyswarm.frames.mapmatch import frame_error
 from polyswarm.polymap import GridPolyMap, MapDelta, VectorType
 from polyswarm.se2 import compose, inverse, transform_points
 from protocols.keys import SwarmKeys
@@ -199,7 +194,7 @@ class Observer:
     def __init__(self, world, cfg: Config, ids: list[str]) -> None:
         self.world = world
         # coverage counts the free space the robots' footprint can reach, less a band of
-        # the lidar's noise along walls (polyswarm.evaluation.reachable_free); the map's
+        # the lidar's noise along walls (polyswarm.evaluation.coverage.reachable_free); the map's
         # IoU is taken against all free space
         lid = cfg.sim.lidar
         res = world.grid.resolution if world.grid is not None else 0.0

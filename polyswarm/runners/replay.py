@@ -28,7 +28,7 @@ import numpy as np
 
 from polyswarm.config import AgentIoConfig
 from polyswarm.io.carmen import read_carmen
-from polyswarm.odometry import IncrementNoise, noisy_odometry
+from polyswarm.slam.odometry import IncrementNoise, noisy_odometry
 from protocols.keys import RobotKeys
 from protocols.messages import CmdVel, Odometry, Scan
 

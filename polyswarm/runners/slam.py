@@ -17,16 +17,17 @@ from pathlib import Path
 
 import numpy as np
 
-from polyswarm import evaluation as ev
 from polyswarm.config import Config, config_to_dict, save_config, with_overrides
 from polyswarm.errors import DataFormatError
+from polyswarm.evaluation import maps as evm
+from polyswarm.evaluation import trajectory as evt
 from polyswarm.io.carmen import read_carmen, real_odometry
 from polyswarm.io.tum import write_tum
-from polyswarm.odometry import IncrementNoise, OdometryBuffer, noisy_odometry
 from polyswarm.polymap import GridPolyMap, VectorType
-from polyswarm.scan import deskew_motion
 from polyswarm.se2 import compose
-from polyswarm.slam import PolySlam
+from polyswarm.slam.odometry import IncrementNoise, OdometryBuffer, noisy_odometry
+from polyswarm.slam.polyslam import PolySlam
+from polyswarm.slam.scan import deskew_motion
 
 Progress = Callable[[float, float], None]  # (done, total)
 
@@ -192,8 +193,8 @@ def run_bag(
         "skipped": dict(bag.skipped),
         "mount": mount_from,
         "odometry": "the bag's wheel odometry",
-        "occupied_cells_5cm": ev.occupied_cells(scans, final, mount_t),
-        "odometry_occupied_cells_5cm": ev.occupied_cells(scans, np.array(odo), mount_t),
+        "occupied_cells_5cm": evm.occupied_cells(scans, final, mount_t),
+        "odometry_occupied_cells_5cm": evm.occupied_cells(scans, np.array(odo), mount_t),
     }
     run = SlamRun(
         Path(path).name.split(".")[0],
@@ -320,7 +321,7 @@ def metrics(run: SlamRun) -> dict:
         "reseeded_keyframes": run.slam.reseeded,
         "map_rebuilt_at_optimised_poses": run.final_map is not None,
         "distance_travelled_m": float(
-            ev.travelled(run.estimate if run.reference is None else run.reference)[-1]
+            evt.travelled(run.estimate if run.reference is None else run.reference)[-1]
         ),
         "vectors": int(sum(run.map.vector_counts().values())),
         "vectors_by_type": run.map.vector_counts(),
@@ -333,7 +334,7 @@ def metrics(run: SlamRun) -> dict:
         "keyframe_stage_ms": stage_percentiles(run.stage_ms),
         "realtime_factor": run.stream_s / run.processing_s if run.processing_s > 0 else math.inf,
         "degenerate_keyframes": run.slam.degenerate_keyframes,
-        # the odometry's distance scale PolySLAM learnt (polyswarm.odomscale)
+        # the odometry's distance scale PolySLAM learnt (polyswarm.slam.odomscale)
         "odometry_scale": run.slam.odometry_scale.scale,
         "rejected_keyframes": run.slam.rejected_keyframes,
         **run.info,
@@ -342,10 +343,10 @@ def metrics(run: SlamRun) -> dict:
     out |= corrections(run)
     if run.simulated and run.world is not None:
         w = run.world
-        out["map_iou"] = ev.map_iou(run.map.explored_region(), w.free)
+        out["map_iou"] = evm.map_iou(run.map.explored_region(), w.free)
         s, e, _ = run.map.vectors([VectorType.OBSTACLE])
         ws, we = w.wall_segments
-        out["wall_distance_mean_m"] = ev.wall_distance(s, e, ws, we)
+        out["wall_distance_mean_m"] = evm.wall_distance(s, e, ws, we)
     return out
 
 
@@ -362,13 +363,13 @@ def live_vs_rebuilt(run: SlamRun) -> dict:
     s, e, _ = live.vectors([VectorType.OBSTACLE])
     rs, re_, _ = rebuilt.vectors([VectorType.OBSTACLE])
     return {
-        "live_vs_rebuilt_iou": ev.map_iou(live.explored_region(), rebuilt.explored_region()),
-        "ghost_wall_share": ev.ghost_wall_share(s, e, rs, re_, GHOST_WALL_M),
+        "live_vs_rebuilt_iou": evm.map_iou(live.explored_region(), rebuilt.explored_region()),
+        "ghost_wall_share": evm.ghost_wall_share(s, e, rs, re_, GHOST_WALL_M),
     }
 
 
 def corrections(run: SlamRun) -> dict:
-    """Loop closures that moved keyframes' content in the live map (polyswarm.follow):
+    """Loop closures that moved keyframes' content in the live map (polyswarm.slam.follow):
     how many, the cells merged again, and the time each took (part of its keyframe's)."""
     c = run.slam.corrections
     ms = [x["ms"] for x in c]
@@ -382,14 +383,14 @@ def corrections(run: SlamRun) -> dict:
 
 def _trajectory_errors(run: SlamRun) -> dict:
     est, ref = run.estimate, run.reference
-    t_max, r_max = ev.max_errors(est, ref)
-    dist = float(ev.travelled(ref)[-1])
-    r1, r10 = ev.rpe(est, ref, 1.0), ev.rpe(est, ref, 10.0)
+    t_max, r_max = evt.max_errors(est, ref)
+    dist = float(evt.travelled(ref)[-1])
+    r1, r10 = evt.rpe(est, ref, 1.0), evt.rpe(est, ref, 10.0)
     return {
-        "ate_rmse_m": ev.ate_rmse(est, ref),
+        "ate_rmse_m": evt.ate_rmse(est, ref),
         # the poses as they were estimated scan by scan, before later loop corrections
-        "ate_rmse_online_m": ev.ate_rmse(run.online, ref) if run.online is not None else None,
-        "odometry_ate_rmse_m": ev.ate_rmse(run.odometry, ref),
+        "ate_rmse_online_m": evt.ate_rmse(run.online, ref) if run.online is not None else None,
+        "odometry_ate_rmse_m": evt.ate_rmse(run.odometry, ref),
         "rpe_1m_trans_mean_m": r1["trans_mean_m"],
         "rpe_1m_trans_std_m": r1["trans_std_m"],
         "rpe_1m_rot_mean_deg": r1["rot_mean_deg"],

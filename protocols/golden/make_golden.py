@@ -54,7 +54,7 @@ def golden_correction():
     that follows its pose graph; then the corridor moved 2 cm along x, 1 cm back along y
     and turned 5 mrad. Returns (the map and atlas before, the merge ops, the correction,
     the map after)."""
-    from polyswarm.follow import Atlas, correct, pose_of
+    from polyswarm.slam.follow import Atlas, correct, pose_of
 
     room, corridor = _golden_polygons()
     options = SLAM_OPTIONS

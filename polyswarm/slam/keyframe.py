@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from polyswarm.polymap import Ring, TypedPolygon, VectorType
-from polyswarm.scan import ScanPoints
+from polyswarm.slam.scan import ScanPoints
 
 
 def transform(xy: np.ndarray, pose) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 Two robots' maps of a building that looks the same after a quarter turn (a ring
 corridor, a cross) fit each other equally well at the true frame and at its rotated
-images: no check on the two maps alone can tell them apart (``polyswarm.mapmatch``).
+images: no check on the two maps alone can tell them apart (``polyswarm.frames.mapmatch``).
 What breaks the symmetry is that the robots were *somewhere* at every moment, and lidars
 see robots. A frame predicts where robot B stood, in A's map, at each moment A
 scanned; if the prediction falls well inside what A's scan saw free at that moment, A
@@ -20,7 +20,7 @@ always reaches a wall, whose returns would otherwise hide every prediction.
 ``seen`` counts the opposite, positive evidence: a return where the frame puts the other
 robot, clear of the viewer's walls. A frame is committed only when the robots have seen
 each other in a few places where it puts them (``distinct_places``;
-``polyswarm.mapmatch.FrameEstimate``); robots exploring apart seldom see each other, so
+``polyswarm.frames.mapmatch.FrameEstimate``); robots exploring apart seldom see each other, so
 the coordinator sends a waiting robot towards where its candidate frame puts the others
 (``agents.anchoring``).
 

@@ -38,7 +38,7 @@ import shapely
 import shapely.ops
 
 from polyswarm.errors import OffMapError, PlanningError
-from polyswarm.navgraph import (
+from polyswarm.nav.navgraph import (
     BOUNDARY,
     BUFFER_SEGMENTS,
     TIGHT_PENALTY_M,

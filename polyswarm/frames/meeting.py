@@ -2,7 +2,7 @@
 be seen by the robot its candidate frame puts nearby, apart from where it stood before.
 
 A frame is committed only once the robots saw each other in ``SEEN_APART_M``-distinct
-places (``polyswarm.sighting``). A waiting robot is drawn towards the other robot through
+places (``polyswarm.frames.sighting``). A waiting robot is drawn towards the other robot through
 its frontiers; once its own map has none left it stands still, and where the robots
 never come together on their way (a flat a long-range lidar explores from the doorways
 in seconds) they are seen in one or two places and never merged. Touring standpoints
@@ -18,9 +18,9 @@ import math
 import numpy as np
 import shapely
 
-from polyswarm.navgraph import clear_of
+from polyswarm.frames.sighting import BODY_M, MIN_SIGHT_M, SEEN_APART_M, WALL_CLEAR_M, Room
+from polyswarm.nav.navgraph import clear_of
 from polyswarm.polymap import VectorType
-from polyswarm.sighting import BODY_M, MIN_SIGHT_M, SEEN_APART_M, WALL_CLEAR_M, Room
 
 # nearer than this a sighting's bearing says nothing (MIN_SIGHT_M), plus a margin for the
 # robots' pose errors: a standpoint at least this far from the other robot
@@ -34,7 +34,7 @@ MEET_WALL_M = 0.35
 # far inside the edges of its lidar's field of view (radians; 15 degrees)
 FOV_MARGIN_RAD = math.radians(15.0)
 # a sighting counts only where the return the robot makes, and the space a robot's width
-# behind it, lie WALL_CLEAR_M from the viewer's walls (``polyswarm.sighting.seen_where``):
+# behind it, lie WALL_CLEAR_M from the viewer's walls (``polyswarm.frames.sighting.seen_where``):
 # the return is up to BODY_M nearer than the robot's pose, so the stretch from BODY_M
 # before it to 2 BODY_M past it, along the line of sight, is checked at these points
 # (in BODY_M, 0.3 m apart: a wall end between two is at most 2 cm nearer than both). In

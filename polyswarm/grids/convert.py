@@ -21,7 +21,7 @@ import numpy as np
 import shapely
 
 from polyswarm.errors import DataFormatError
-from polyswarm.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from polyswarm.grids.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
 
 log = logging.getLogger(__name__)

@@ -18,8 +18,8 @@ import math
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from polyswarm.icp import sample_vectors
 from polyswarm.se2 import transform_points
+from polyswarm.slam.icp import sample_vectors
 
 RESOLUTION_M = 0.05  # distance-field cell
 HIT_SIGMA_M = 0.05  # a point this far from a wall scores exp(-1/2)

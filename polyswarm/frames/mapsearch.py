@@ -1,4 +1,4 @@
-"""The search step of map matching (``polyswarm.mapmatch``): for every heading, where map
+"""The search step of map matching (``polyswarm.frames.mapmatch``): for every heading, where map
 B's frame puts B's walls on A's walls and neither map's walls in the other's clear
 space, with no pose prior.
 

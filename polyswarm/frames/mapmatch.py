@@ -3,7 +3,7 @@
 Robots whose start poses nobody measured build maps in frames of their own. This finds
 the pose of map B's frame in map A's frame, or says why it cannot:
 
-1. *Search* (``polyswarm.mapsearch``). Both maps are rasterised at ``RESOLUTION_M``:
+1. *Search* (``polyswarm.frames.mapsearch``). Both maps are rasterised at ``RESOLUTION_M``:
    A's walls as a hit score (a Gaussian of the distance to its obstacle vectors) and
    A's *clear* space (explored, and deeper inside it than ``CLEAR_M``); B the same. For
    every heading on a ``HEADING_STEP_RAD`` grid, every translation is scored: B's walls
@@ -45,19 +45,19 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from polyswarm.errors import PolyswarmError
-from polyswarm.icp import sample_vectors
-from polyswarm.mapsearch import (  # noqa: F401 (the search's constants, used here and re-exported)
+from polyswarm.frames.mapsearch import (  # noqa: F401 (the search's constants, used here and re-exported)
     CONFLICT_WEIGHT,
     HEADING_STEP_RAD,
     PEAK_APART_M,
     PEAKS,
     RESOLUTION_M,
 )
-from polyswarm.mapsearch import close as _close
-from polyswarm.mapsearch import search as coarse_to_fine
+from polyswarm.frames.mapsearch import close as _close
+from polyswarm.frames.mapsearch import search as coarse_to_fine
+from polyswarm.frames.sighting import BODY_M
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
 from polyswarm.se2 import compose, inverse, transform_points, wrap
-from polyswarm.sighting import BODY_M
+from polyswarm.slam.icp import sample_vectors
 
 HIT_SIGMA_M = 0.15  # a wall point this far from the other's wall scores exp(-1/2)
 CLEAR_M = 0.30  # explored space deeper than this inside is "clear" (noise, corners)
@@ -423,7 +423,7 @@ def match_maps(
 ) -> MapMatch:
     """The pose of map B's frame in map A's frame, with its evidence (see the module).
 
-    ``contradicts``: evidence from outside the maps (``polyswarm.sighting``: the pose
+    ``contradicts``: evidence from outside the maps (``polyswarm.frames.sighting``: the pose
     puts one robot where the other's lidar saw nothing). Candidate poses it contradicts,
     before or after refinement, are left out: in a symmetric building the maps fit the
     truth and its rotated images alike, and the truth stands alone only once the images
@@ -435,11 +435,11 @@ def match_maps(
     out makes the match ambiguous. ``FrameEstimate`` does not need it: the sightings it
     commits on rule out images as well.
 
-    ``search``: ``polyswarm.mapsearch.search``, or ``search_fine`` (the one-pass search
+    ``search``: ``polyswarm.frames.mapsearch.search``, or ``search_fine`` (the one-pass search
     it is checked against, 3-10 times slower).
 
     ``a_paths``, ``b_paths``: where each map's robots went (polylines in its frame,
-    ``polyswarm.sighting.Track.paths``): a wall of one map there is no conflict with the
+    ``polyswarm.frames.sighting.Track.paths``): a wall of one map there is no conflict with the
     other (``TRODDEN_M``)."""
     va, vb = _view(a, a_paths), _view(b, b_paths)
     cands = search(va, vb)
@@ -600,7 +600,7 @@ AGREE_M, AGREE_RAD = 0.3, math.radians(3.0)  # two matches within this are the s
 AGREE_MATCHES = 2  # matches in a row that must propose a frame before it is committed
 REVISE_MATCHES = 3  # matches in a row that propose another frame (robots seen): revise it
 # the robots must have seen each other in this many places where the frame puts them
-# (``polyswarm.sighting.distinct_places``) before it is committed: in a building that looks
+# (``polyswarm.frames.sighting.distinct_places``) before it is committed: in a building that looks
 # the same after a quarter turn the maps fit a wrong image as well as the truth, or better
 # when SLAM drift bends one map (bench merge, 5 worlds x 5 seeds: at the 43 wrong poses
 # accepted the robots were seen in 0-2 places, at 55 of 136 right ones in 3-13). Nothing

@@ -8,7 +8,7 @@ builds one graph over all of them:
 * **inter-robot edges**: a keyframe's walls and those of its neighbours in time
   (``WINDOW_KEYFRAMES``, within ``LOCAL_RADIUS_M``) placed on another robot's walls
   nearby by a correlative search (``SEED_WINDOW_*``: unless another place fits nearly
-  as well) and point-to-line ICP (``polyswarm.mapmatch.align_walls``), accepted when the
+  as well) and point-to-line ICP (``polyswarm.frames.mapmatch.align_walls``), accepted when the
   walls agree (``MIN_INLIERS``, ``MIN_INLIER_SHARE``), pin the pose in both directions
   (``MIN_CONDITION``: not a corridor) and the fix is local (``MAX_FIX_*``: frames are
   found by ``agents.anchoring`` first, or told; this refines them);
@@ -37,9 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from polyswarm.follow import REACH_M, QPose, frame_of, pose_of
-from polyswarm.loopsearch import correlative_search
-from polyswarm.mapmatch import (
+from polyswarm.frames.mapmatch import (
     INLIER_M,
     NORMAL_WEIGHT_M,
     Walls,
@@ -48,8 +46,10 @@ from polyswarm.mapmatch import (
     wall_tree,
 )
 from polyswarm.polymap import TypedPolygon, VectorType
-from polyswarm.posegraph import PoseGraph
 from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
+from polyswarm.slam.follow import REACH_M, QPose, frame_of, pose_of
+from polyswarm.slam.loopsearch import correlative_search
+from polyswarm.slam.posegraph import PoseGraph
 
 log = logging.getLogger(__name__)
 
@@ -138,7 +138,7 @@ class KeyframeLedger:
 
     @classmethod
     def from_atlas(cls, atlas) -> KeyframeLedger:
-        """The ledger of a map handed over whole with its atlas (``polyswarm.follow``)."""
+        """The ledger of a map handed over whole with its atlas (``polyswarm.slam.follow``)."""
         out = cls()
         for kid, polygon in atlas.polygons.items():
             out.keyframes[kid] = _keyframe(polygon, atlas.poses[kid])

@@ -3,7 +3,7 @@
 A wheel whose radius is 1 % off makes every distance the odometry reports 1 % off. ICP
 removes that error wherever the scan constrains the pose in every direction, but in a
 corridor with no end in sight it keeps the odometry along the corridor (the degeneracy
-guard in ``polyswarm.icp``), so the scale error goes straight into the map: on the
+guard in ``polyswarm.slam.icp``), so the scale error goes straight into the map: on the
 thesis's loop world with the TurtleBot3's odometry noise (a distance scale error of 1 %
 as one sigma, drawn per robot), 44 % of the keyframes were degenerate and the corridors
 came out up to 1 m long or short.

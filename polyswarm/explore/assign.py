@@ -1,7 +1,7 @@
 """Frontier-based exploration: path costs and assignment strategies.
 
 (The targets themselves, frontier segments with goal points and utilities, are made
-by ``polyswarm.targets``.)
+by ``polyswarm.explore.targets``.)
 
 * ``path_costs``: shortest-path lengths over the navigation graph from every robot to
   every goal (one Dijkstra per robot, scipy);
@@ -33,7 +33,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from polyswarm.config import Strategy
-from polyswarm.navgraph import TIGHT_PENALTY_M, NavGraph, node_of
+from polyswarm.nav.navgraph import TIGHT_PENALTY_M, NavGraph, node_of
 from polyswarm.polymap import GridPolyMap
 
 UNREACHABLE = math.inf

@@ -8,7 +8,7 @@ the weighted edge errors with a robust (Huber) loss, so a wrong loop edge is
 down-weighted rather than bending the whole trajectory; node 0 stays fixed (it
 anchors the map frame), unless the graph holds *priors*: poses of nodes in the map
 frame that others measured (``set_priors``: the swarm's joint pose graph,
-``polyswarm.jointgraph``); then the priors hold the frame and node 0 moves too.
+``polyswarm.frames.jointgraph``); then the priors hold the frame and node 0 moves too.
 
     g = PoseGraph()
     a = g.add_node((0, 0, 0)); b = g.add_node((1, 0, 0))

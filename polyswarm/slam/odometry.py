@@ -23,7 +23,7 @@ class IncrementNoise:
     heading_sigma_per_m: float = 0.02  # rad per metre travelled
 
     def describe(self) -> dict:
-        return {"model": "per-increment (polyswarm.odometry)", **asdict(self)}
+        return {"model": "per-increment (polyswarm.slam.odometry)", **asdict(self)}
 
 
 def noisy_odometry(reference: np.ndarray, noise: IncrementNoise, seed: int) -> np.ndarray:
@@ -50,7 +50,7 @@ class OdometryBuffer:
     (linear between two readings, heading on the short way round; clamped at the ends).
 
     A scan is matched with the odometry of its time, and a rolling sweep is de-skewed
-    with the poses at each of its beams (``polyswarm.scan.deskew_motion``)."""
+    with the poses at each of its beams (``polyswarm.slam.scan.deskew_motion``)."""
 
     def __init__(self, capacity: int = 200) -> None:
         self.capacity = capacity

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from polyswarm.frontiers import FrontierSegment, extract_frontiers, points_along
-from polyswarm.navgraph import NavGraph, clear_of, nodes_of
+from polyswarm.explore.frontiers import FrontierSegment, extract_frontiers, points_along
+from polyswarm.nav.navgraph import NavGraph, clear_of, nodes_of
 from polyswarm.polymap import GridPolyMap, VectorType
 from polyswarm.raycast import cast_rays
 
@@ -39,7 +39,7 @@ class Sensor:
 
     @property
     def sure_range_m(self) -> float:
-        """How far the lidar surely sees free space (``polyswarm.scan.NO_RETURN_SHARE``)."""
+        """How far the lidar surely sees free space (``polyswarm.slam.scan.NO_RETURN_SHARE``)."""
         return SURE_RANGE_SHARE * self.range_m
 
     @property
@@ -58,7 +58,7 @@ class Sensor:
         return min(GAIN_RADIUS_M, self.sure_range_m)
 
 
-SURE_RANGE_SHARE = 0.8  # as polyswarm.scan.NO_RETURN_SHARE: no-return beams end there
+SURE_RANGE_SHARE = 0.8  # as polyswarm.slam.scan.NO_RETURN_SHARE: no-return beams end there
 STANDOFF_SHARE = 0.45  # a goal at most this share of the range from its frontier
 GOAL_OFFSETS_M = (0.6, 1.0, 1.5, 0.35)  # goal candidates this far inside the free side
 GOAL_ALONG = (0.5, 0.25, 0.75)  # ... at these fractions along the frontier
@@ -124,7 +124,7 @@ def frontier_targets(
 
     A goal is the first candidate (the sensor's ``goal_offsets_m`` into the free side,
     at ``GOAL_ALONG`` of the frontier) that lies in a navigation-graph node (one the
-    robots can reach, given ``reach``, a ``polyswarm.explore.Reach``) and at least the
+    robots can reach, given ``reach``, a ``polyswarm.explore.assign.Reach``) and at least the
     graph's radius from every obstacle vector; else the nearest such node within the
     sensor's ``fallback_radius_m`` that sees the frontier (a frontier seen through a door
     is looked at from the door).

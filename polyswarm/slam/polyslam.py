@@ -12,10 +12,10 @@ Only keyframes (moved ``keyframe_distance_m`` or turned ``keyframe_angle_rad`` s
 the last one) are aligned and merged; other scans get the odometry prediction.
 
 Beyond the thesis: ICP matches against the obstacle vectors of the nearby keyframes
-rather than the merged map (``polyswarm.submap`` says why), and each keyframe is a node
+rather than the merged map (``polyswarm.slam.submap`` says why), and each keyframe is a node
 of a pose graph whose loop edges (a scan matched against an old part of the map) are
-optimised as they are found (``polyswarm.posegraph``). With ``slam.map_follows_graph``
-the map follows each correction (``polyswarm.follow``): the cells of the keyframes it
+optimised as they are found (``polyswarm.slam.posegraph``). With ``slam.map_follows_graph``
+the map follows each correction (``polyswarm.slam.follow``): the cells of the keyframes it
 moved are merged again; otherwise a correction moves the robot and the keyframes it
 matches against, not what it already merged. ``rebuild_map()`` merges every keyframe
 afresh at its optimised pose (offline runs), and ``trajectory()`` gives every scan's
@@ -33,12 +33,7 @@ import numpy as np
 
 from polyswarm.config import IcpReference, SlamConfig
 from polyswarm.errors import PolyswarmError
-from polyswarm.follow import Atlas, CorrectionOp, correct, pose_of
-from polyswarm.icp import IcpResult, PointToVectorIcp
-from polyswarm.keyframe import keyframe_polygon
-from polyswarm.loopsearch import correlative_search
-from polyswarm.mapmatch import transform_map
-from polyswarm.odomscale import OdometryScale
+from polyswarm.frames.mapmatch import transform_map
 from polyswarm.polymap import (
     UNITS_PER_M,
     GridPolyMap,
@@ -49,12 +44,17 @@ from polyswarm.polymap import (
     cells_digest,
     snap_polygon,
 )
-from polyswarm.posegraph import PoseGraph
-from polyswarm.refine import refine_polygon
-from polyswarm.scan import LaserScan, isolated_blobs, scan_to_points
 from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
-from polyswarm.submap import KeyframeStore
-from polyswarm.trim import trim_keyframe
+from polyswarm.slam.follow import Atlas, CorrectionOp, correct, pose_of
+from polyswarm.slam.icp import IcpResult, PointToVectorIcp
+from polyswarm.slam.keyframe import keyframe_polygon
+from polyswarm.slam.loopsearch import correlative_search
+from polyswarm.slam.odomscale import OdometryScale
+from polyswarm.slam.posegraph import PoseGraph
+from polyswarm.slam.refine import refine_polygon
+from polyswarm.slam.scan import LaserScan, isolated_blobs, scan_to_points
+from polyswarm.slam.submap import KeyframeStore
+from polyswarm.slam.trim import trim_keyframe
 
 log = logging.getLogger(__name__)
 
@@ -174,7 +174,7 @@ class PolySlam:
         self._steps: list[tuple[int, np.ndarray]] = []  # every scan: (keyframe, offset)
         self._last_loop = self._last_search = -(10**9)  # keyframes of the last loop, search
         self._travel_since_loop_m = 0.0  # distance driven since the last loop edge
-        # the map follows the pose graph (polyswarm.follow): the keyframes as merged and
+        # the map follows the pose graph (polyswarm.slam.follow): the keyframes as merged and
         # where they are placed now, this step's correction, and what each one cost
         self.atlas = Atlas()
         self._frames: dict[int, np.ndarray] = {}  # keyframe -> its atlas frame, seen from it
@@ -250,8 +250,8 @@ class PolySlam:
         self.map, _ = self.map.with_cells_of(moved, set(self.map.cells) | set(moved.cells))
 
     def constrain(self, frames: dict[int, np.ndarray], sigma_m: float, sigma_rad: float) -> int:
-        """Priors from the swarm's joint pose graph (``polyswarm.jointgraph``): keyframe id
-        -> where the frame its polygon is held at (``polyswarm.follow``) belongs, in the
+        """Priors from the swarm's joint pose graph (``polyswarm.frames.jointgraph``): keyframe id
+        -> where the frame its polygon is held at (``polyswarm.slam.follow``) belongs, in the
         frame this SLAM is in. They replace earlier priors in the pose graph, which is
         optimised at the next scan (made a keyframe); the map follows as after a loop
         closure. Keyframes not held (a resumed map does not follow the graph) are left
@@ -284,9 +284,9 @@ class PolySlam:
         self, scan: LaserScan, odom, motion: np.ndarray | None = None, blobs_m: float = 0.0
     ) -> SlamStep:
         """One scan with the odometry pose of the time its points are expressed at;
-        ``motion`` (``polyswarm.scan.deskew_motion``) de-skews a rolling sweep.
+        ``motion`` (``polyswarm.slam.scan.deskew_motion``) de-skews a rolling sweep.
         ``blobs_m`` > 0: returns in isolated blobs no wider than that (metres;
-        ``polyswarm.scan.isolated_blobs``) are left out of ICP and loop closure, still
+        ``polyswarm.slam.scan.isolated_blobs``) are left out of ICP and loop closure, still
         mapped: other robots the caller cannot place, which would pull the pose along
         a corridor as they move."""
         odom = np.array(odom, dtype=float)
@@ -573,7 +573,7 @@ class PolySlam:
         return poses[-1]
 
     def _follow(self) -> None:
-        """Merge again the cells of keyframes the optimisation moved (polyswarm.follow)."""
+        """Merge again the cells of keyframes the optimisation moved (polyswarm.slam.follow)."""
         kfs = self.store.keyframes
         poses = {k: compose(kfs[k].pose, f) for k, f in self._frames.items()}
         self.map, op, info = correct(self.map, self.atlas, poses)

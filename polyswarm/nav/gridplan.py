@@ -17,7 +17,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from polyswarm.occupancy import OccupancyGrid
+from polyswarm.grids.occupancy import OccupancyGrid
 
 SQRT2 = math.sqrt(2.0)
 

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyswarm.errors import MapError
-from polyswarm.occupancy import FREE, OCCUPIED, UNKNOWN
-from polyswarm.scan import LaserScan
+from polyswarm.grids.occupancy import FREE, OCCUPIED, UNKNOWN
+from polyswarm.slam.scan import LaserScan
 
 OCC_THRESH = 0.25  # slam_gmapping's ~occ_thresh default: occupied above this hit share
 MAX_GRID_CELLS = 64_000_000  # a grid larger than this (512 MB of two int32 counts) is refused

@@ -8,7 +8,7 @@ while against the refined polygons of the previous keyframes the bias was 0.0 cm
 (std 0.33 deg), and the bias added up to metres of drift. So each keyframe's refined
 obstacle vectors are kept in the keyframe's own frame, and a scan is matched against
 the keyframes nearest to its predicted pose plus the latest few. Keeping them in the
-keyframe's frame lets a pose-graph correction (``polyswarm.posegraph``) move them with
+keyframe's frame lets a pose-graph correction (``polyswarm.slam.posegraph``) move them with
 their keyframe.
 
     store = KeyframeStore(max_keyframes=20, radius_m=10.0, recent=5)
