@@ -437,7 +437,7 @@ class RobotAgent:
         """The lidar's mount from the robot's /tf_static (``protocols.bags.Mount2D``, or
         None: nothing new), unless the config sets one; without either, said once after
         ``MOUNT_WAIT_SCANS`` scans."""
-        from protocols.bags import choose_mount
+        from protocols.tf import TF, TF_STATIC, choose_mount
 
         if found is None:
             if (
@@ -449,7 +449,7 @@ class RobotAgent:
                 choose_mount(self.cfg.slam.mount, None, self.id)
             return
         mount, source = choose_mount(self.cfg.slam.mount, found, self.id)
-        if source == "tf":
+        if source in (TF_STATIC, TF):
             if self.stats.scans:
                 log.warning("%s: the mount from tf came after %d scans", self.id, self.stats.scans)
             self.cfg = replace(self.cfg, slam=replace(self.cfg.slam, mount=mount))

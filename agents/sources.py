@@ -24,9 +24,9 @@ import time
 from polyswarm.config import AgentIoConfig, CommandOutput, SensorSource
 from protocols import rmw_zenoh as rz
 from protocols import ros
-from protocols.bags import Mount2D, mount_from_tf
 from protocols.keys import RobotKeys
 from protocols.messages import Assignment, CmdVel, Odometry, Scan
+from protocols.tf import Mount2D, mount_from_tf
 
 log = logging.getLogger(__name__)
 

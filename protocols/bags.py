@@ -2,16 +2,22 @@
 
 ``read_bag`` picks the LaserScan and Odometry topics by type (or by name), converts
 every message with the decoders the live ROS source uses (``protocols.ros``), and reads
-the lidar's mount from ``/tf_static`` (``mount_from_tf``). A message that cannot be
-used (malformed, zero beams, a stamp that goes back) is skipped, counted by reason in
-``Bag.skipped`` and logged once per reason; a bag that cannot be read at all, or has no
-usable scans or odometry, raises ``DataFormatError`` naming the bag's topics.
+the lidar's mount from ``/tf_static``, else from ``/tf`` (``protocols.tf``). Where a
+bag has several LaserScan topics, the raw one is taken by a stated rule
+(``SCAN_TOPIC_RULE``). rosbag2 files written before ROS 2 Iron carry no message
+definitions: those of the distribution the user names are used (``ROS_DISTROS``,
+Humble by default). How the lidar's driver reports a beam without a return (+inf,
+NaN or 0.0) is read off the scans (``no_return_convention``).
+
+A message that cannot be used (malformed, zero beams, a stamp that goes back) is
+skipped, counted by reason in ``Bag.skipped`` and logged once per reason; a bag that
+cannot be read at all, or has no usable scans or odometry, raises ``DataFormatError``
+naming the bag's topics.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,25 +28,19 @@ from polyswarm.errors import DataFormatError
 from polyswarm.slam.scan import LaserScan
 from protocols import ros
 from protocols.messages import ProtocolError
+from protocols.tf import TF, TF_STATIC, MountSources, mount_from_tf
 
 log = logging.getLogger(__name__)
 
-TF_STATIC = "/tf_static"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 BAG_SUFFIXES = (".bag", ".mcap", ".db3")
-
-
-@dataclass(frozen=True)
-class Mount2D:
-    """The lidar on the robot, as polyswarm uses it: position (metres), yaw (radians),
-    and whether it is upside down (its beams then run clockwise seen from above)."""
-
-    x_m: float
-    y_m: float
-    yaw_rad: float
-    upside_down: bool
-    base_frame: str = ""
-    scan_frame: str = ""
+# the message definitions a bag without its own is read with (rosbags' type stores)
+ROS_DISTROS = ("foxy", "galactic", "humble", "iron", "jazzy", "kilted")
+DEFAULT_ROS_DISTRO = "humble"
+SCAN_TOPIC_RULE = (
+    "a topic named 'scan' before any other (the driver's raw scan: /scan before "
+    "/stable_scan or /scan_filtered), the shortest such name first"
+)
 
 
 @dataclass
@@ -54,9 +54,18 @@ class Bag:
     odom_raw: list[bytes | None]  # each odometry message's CDR as recorded, or None
     scan_frame: str
     base_frame: str  # the odometry's child frame
-    mount: Mount2D | None  # from /tf_static, when the bag has it
+    mounts: MountSources  # the mount as /tf_static and /tf give it
     ros2: bool
     skipped: Counter = field(default_factory=Counter)
+    scan_topic_note: str = ""  # why this scan topic, when the bag has several
+    no_return: str = "inf"  # config.OutOfRange: how the driver reports a beam without return
+    no_return_share: float = 0.0  # share of all beams reported so
+    definitions: str = "the bag's own"  # the message definitions the bag was read with
+
+    @property
+    def mount(self):
+        """The mount from tf (/tf_static's, else /tf's), or None."""
+        return self.mounts.best()[0]
 
     @property
     def duration_s(self) -> float:
@@ -92,33 +101,75 @@ def _pick(connections, msgtype: str, wanted: str | None, what: str, listing: str
     return topics[0]
 
 
-def read_bag(path: str | Path, scan_topic: str | None = None, odom_topic: str | None = None) -> Bag:
-    """Every scan and odometry message of a bag, sorted by header stamp."""
+def pick_scan_topic(topics: list[str]) -> tuple[str | None, str]:
+    """The raw scan among several LaserScan topics (``SCAN_TOPIC_RULE``), and what to say
+    about the choice; None when no topic is named 'scan'."""
+    if len(topics) == 1:
+        return topics[0], ""
+    named = sorted((t for t in topics if t.rstrip("/").rsplit("/", 1)[-1] == "scan"), key=len)
+    if not named:
+        return None, ""
+    others = ", ".join(t for t in topics if t != named[0])
+    return named[0], f"scans from {named[0]} ({SCAN_TOPIC_RULE}); not from {others}"
+
+
+def _typestore(distro: str):
+    from rosbags.typesys import Stores, get_typestore
+
+    if distro not in ROS_DISTROS:
+        raise DataFormatError(
+            f"unknown ROS 2 distribution {distro!r}; known: {', '.join(ROS_DISTROS)}"
+        )
+    return get_typestore(Stores[f"ROS2_{distro.upper()}"])
+
+
+def no_return_convention(scans: list[LaserScan]) -> tuple[str, float]:
+    """How the driver reports a beam without a return, read off its scans: the most common
+    of +inf ("inf"), NaN ("nan") and 0.0 ("zero") among the beams outside the sensor's
+    range (REP 117 asks for +inf; the LDS-01 and Neato drivers publish 0.0), "inf" when
+    there is none; and the share of all beams so reported."""
+    r = np.concatenate([np.asarray(s.ranges, dtype=float) for s in scans]) if scans else []
+    if len(r) == 0:
+        return "inf", 0.0
+    counts = {"inf": int(np.isposinf(r).sum()), "nan": int(np.isnan(r).sum())}
+    counts["zero"] = int((r == 0.0).sum())
+    best = max(counts, key=counts.get)
+    if counts[best] == 0:
+        return "inf", 0.0
+    return best, counts[best] / len(r)
+
+
+def read_bag(
+    path: str | Path,
+    scan_topic: str | None = None,
+    odom_topic: str | None = None,
+    ros_distro: str = DEFAULT_ROS_DISTRO,
+) -> Bag:
+    """Every scan and odometry message of a bag, sorted by header stamp; a bag without
+    message definitions (rosbag2 before Iron) is read with those of ``ros_distro``."""
     from rosbags.highlevel import AnyReader
 
     p = Path(path)
     if not p.exists():
         raise DataFormatError(f"bag not found: {p}")
+    store = _typestore(ros_distro)
     skipped: Counter = Counter()
-    scans: list[tuple[float, LaserScan, bytes | None, str]] = []
-    odom: list[tuple] = []  # (stamp, x, y, yaw, raw CDR or None)
-    base_frames: Counter = Counter()
-    tf_msgs = []
+    into = ([], [], {TF_STATIC: [], TF: []}, Counter())  # scans, odom, tf, base frames
     try:
-        with AnyReader([p]) as reader:
+        with AnyReader([p], default_typestore=store) as reader:
             conns = reader.connections
             listing = ", ".join(sorted(f"{c.topic} ({c.msgtype})" for c in conns)) or "nothing"
-            s_topic = _pick(conns, ros.LASER_SCAN, scan_topic, "scan", listing)
+            s_topic, note = _scan_topic(conns, scan_topic, listing)
             o_topic = _pick(conns, ros.ODOMETRY, odom_topic, "odom", listing)
-            wanted = [c for c in conns if c.topic in (s_topic, o_topic, TF_STATIC)]
+            wanted = [c for c in conns if c.topic in (s_topic, o_topic, TF_STATIC, TF)]
             ros2 = bool(reader.is2)
-            _read_messages(
-                reader, wanted, (s_topic, o_topic), (scans, odom, tf_msgs, base_frames), skipped
-            )
+            own = _has_definitions(reader)
+            _read_messages(reader, wanted, (s_topic, o_topic), into, skipped)
     except DataFormatError:
         raise
     except Exception as e:  # rosbags raises many types on bags it cannot open
         raise DataFormatError(f"{p}: cannot read the bag: {type(e).__name__}: {e}") from None
+    scans, odom, tf_msgs, base_frames = into
     if not scans:
         raise DataFormatError(f"{p}: no usable scans on {s_topic} (skipped: {dict(skipped)})")
     if len(odom) < 2:
@@ -130,7 +181,13 @@ def read_bag(path: str | Path, scan_topic: str | None = None, odom_topic: str | 
     od = np.array([o[:4] for o in odom], dtype=float)
     scan_frame = Counter(s[3] for s in scans).most_common(1)[0][0]
     base = base_frames.most_common(1)[0][0] if base_frames else ""
-    mount = mount_from_tf(tf_msgs, base, scan_frame) if tf_msgs else None
+    mounts = MountSources(
+        _mount(tf_msgs[TF_STATIC], base, scan_frame, skipped),
+        _mount(tf_msgs[TF], base, scan_frame, skipped),
+    )
+    no_return, share = no_return_convention([s[1] for s in scans])
+    if note:
+        log.info("%s: %s", p, note)
     return Bag(
         str(p),
         s_topic,
@@ -141,14 +198,47 @@ def read_bag(path: str | Path, scan_topic: str | None = None, odom_topic: str | 
         [o[4] for o in odom],
         scan_frame,
         base,
-        mount,
+        mounts,
         ros2,
         skipped,
+        note,
+        no_return,
+        share,
+        "the bag's own" if own else f"ROS 2 {ros_distro}'s (the bag has none)",
     )
 
 
+def _scan_topic(conns, wanted: str | None, listing: str) -> tuple[str, str]:
+    if wanted is not None:
+        return _pick(conns, ros.LASER_SCAN, wanted, "scan", listing), ""
+    topics = sorted({c.topic for c in conns if c.msgtype == ros.LASER_SCAN})
+    if len(topics) > 1:
+        chosen, note = pick_scan_topic(topics)
+        if chosen is not None:
+            return chosen, note
+    return _pick(conns, ros.LASER_SCAN, None, "scan", listing), ""
+
+
+def _has_definitions(reader) -> bool:
+    """Whether the bag carried its own message definitions (ROS 1 bags always do)."""
+    if not reader.is2:
+        return True
+    return any(getattr(c, "msgdef", None) and c.msgdef.data for c in reader.connections)
+
+
+def _mount(msgs: list, base: str, scan_frame: str, skipped: Counter):
+    if not msgs:
+        return None
+    try:
+        return mount_from_tf(msgs, base, scan_frame)
+    except DataFormatError as e:  # a cycle, a broken quaternion: that topic says nothing
+        _skip(skipped, "an unusable tf tree", str(e))
+        return None
+
+
 def _read_messages(reader, wanted, topics, into, skipped: Counter) -> None:
-    """Append the bag's messages to ``into`` = (scans, odom, tf messages, base frames)."""
+    """Append the bag's messages to ``into`` = (scans, odom, tf messages by topic, base
+    frames)."""
     s_topic, o_topic = topics
     scans, odom, tf_msgs, base_frames = into
     ros2 = bool(reader.is2)
@@ -166,8 +256,9 @@ def _read_messages(reader, wanted, topics, into, skipped: Counter) -> None:
         except Exception as e:
             _skip(skipped, f"malformed {conn.msgtype}", f"{type(e).__name__}: {e}")
             continue
-        if conn.topic == TF_STATIC:
-            tf_msgs.append(msg)
+        if conn.topic in tf_msgs:
+            if conn.msgtype == TF_MESSAGE:
+                tf_msgs[conn.topic].append(msg)
             continue
         try:
             if conn.topic == s_topic:
@@ -200,99 +291,3 @@ def _monotonic(items: list, skipped: Counter, what: str) -> list:
             continue
         out.append(it)
     return out
-
-
-def choose_mount(configured, from_tf: Mount2D | None, where: str):
-    """The mount to use (a ``config.LidarMount``) and where it came from: the config's
-    when it sets one (anything but the default), else the one from tf, else the default
-    (said once in the log: a wrong mount silently gives a bad map)."""
-    from polyswarm.config import LidarMount
-
-    if configured != LidarMount():
-        if from_tf is not None and not _same_mount(configured, from_tf):
-            log.warning("%s: the config's [slam.mount] overrides tf's %s", where, from_tf)
-        return configured, "config"
-    if from_tf is not None:
-        log.info(
-            "%s: lidar mount from tf (%s -> %s): %s",
-            where,
-            from_tf.base_frame,
-            from_tf.scan_frame,
-            from_tf,
-        )
-        m = from_tf
-        return LidarMount(m.x_m, m.y_m, m.yaw_rad, m.upside_down), "tf"
-    log.warning(
-        "%s: no lidar mount in tf or in the config ([slam.mount]): assuming the lidar at "
-        "the robot's origin, facing forward, upright",
-        where,
-    )
-    return configured, "default"
-
-
-def _same_mount(cfg, tf: Mount2D, tol_m: float = 0.01, tol_rad: float = 0.02) -> bool:
-    dyaw = math.remainder(cfg.yaw_rad - tf.yaw_rad, 2 * math.pi)
-    return (
-        abs(cfg.x_m - tf.x_m) <= tol_m
-        and abs(cfg.y_m - tf.y_m) <= tol_m
-        and abs(dyaw) <= tol_rad
-        and cfg.upside_down == tf.upside_down
-    )
-
-
-# --- the lidar's mount from tf ------------------------------------------------------------
-
-
-def _matrix(t) -> np.ndarray:
-    """A geometry_msgs/Transform as a 4x4 homogeneous matrix."""
-    q = t.rotation
-    x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    if not (math.isfinite(n) and n > 0.5):
-        raise DataFormatError("tf: rotation is not a unit quaternion")
-    x, y, z, w = x / n, y / n, z / n, w / n
-    m = np.eye(4)
-    m[:3, :3] = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ]
-    m[:3, 3] = [float(t.translation.x), float(t.translation.y), float(t.translation.z)]
-    return m
-
-
-def _to_root(frame: str, parent: dict[str, tuple[str, np.ndarray]]) -> tuple[str, np.ndarray]:
-    """(root frame, transform root <- frame) following the tf tree upwards."""
-    m, seen = np.eye(4), {frame}
-    while frame in parent:
-        frame, step = parent[frame][0], parent[frame][1]
-        m = step @ m
-        if frame in seen:
-            raise DataFormatError(f"tf: a cycle through {frame!r}")
-        seen.add(frame)
-    return frame, m
-
-
-def mount_from_tf(tf_messages, base_frame: str, scan_frame: str) -> Mount2D | None:
-    """The scan frame in the base frame, from tf2_msgs/TFMessage messages (``/tf_static``),
-    as a 2D mount: a lidar upside down (rolled or pitched by pi) sweeps clockwise, which
-    ``upside_down`` says and the yaw of its x axis completes. None when the two frames
-    are not connected."""
-    parent: dict[str, tuple[str, np.ndarray]] = {}
-    for msg in tf_messages:
-        for tr in msg.transforms:
-            child = tr.child_frame_id.lstrip("/")
-            parent[child] = (tr.header.frame_id.lstrip("/"), _matrix(tr.transform))
-    base, scan = base_frame.lstrip("/"), scan_frame.lstrip("/")
-    if not base or not scan:
-        return None
-    if base == scan:
-        return Mount2D(0.0, 0.0, 0.0, False, base, scan)
-    root_b, m_b = _to_root(base, parent)
-    root_s, m_s = _to_root(scan, parent)
-    if root_b != root_s:
-        return None
-    m = np.linalg.inv(m_b) @ m_s  # base <- scan
-    r = m[:3, :3]
-    yaw = math.atan2(r[1, 0], r[0, 0])
-    return Mount2D(float(m[0, 3]), float(m[1, 3]), yaw, bool(r[2, 2] < 0), base, scan)

@@ -52,10 +52,23 @@ def make_bag(
     n_scans: int = 200,
     topics=("/scan", "/odom", "/tf_static"),
     defects: bool = False,
+    mount_topic: str = "/tf_static",
+    mount_yaw_error_rad: float = 0.0,
+    tf_mount_error_m: float | None = None,
+    scan_copies=(),
+    odom_shift_s: float = 0.0,
+    blind: bool = False,
 ) -> Path:
     """Write the bag: ``kind`` 'mcap' or 'sqlite3' (rosbag2) or 'ros1'. ``defects``: scan
     10 has no beams, odometry 20 comes twice, scans 30 and 31 are recorded in the wrong
-    order of their stamps."""
+    order of their stamps.
+
+    The mount goes on ``mount_topic`` ('/tf' as ROS 1 setups do: then the moving
+    odom -> base_footprint transform is there too), its yaw ``mount_yaw_error_rad`` off
+    the lidar's true one; ``tf_mount_error_m``: /tf also carries the mount, that many
+    metres off in x (two mounts that disagree). ``scan_copies``: more LaserScan topics
+    with the same scans (a /stable_scan beside /scan). ``odom_shift_s``: odometry stamps
+    shifted by that (0: they overlap the scans). ``blind``: no beam has a return."""
     from rosbags.typesys import Stores, get_typestore
 
     ros1 = kind == "ros1"
@@ -101,7 +114,7 @@ def make_bag(
         sensor = angle_min + inc * np.arange(BEAMS)
         world = th + myaw - sensor  # upside down: a sensor angle points the other way
         r = ray_cast((sx, sy), world)
-        r = np.where(r <= RANGE_MAX_M, r, np.inf).astype(np.float32)
+        r = np.where((r <= RANGE_MAX_M) & (not blind), r, np.inf).astype(np.float32)
         return T["sensor_msgs/msg/LaserScan"](
             header=header(stamps[k], "laser"),
             angle_min=angle_min,
@@ -119,7 +132,7 @@ def make_bag(
         x, y, th = odo[k]
         cov = np.zeros(36)
         return T["nav_msgs/msg/Odometry"](
-            header=header(stamps[k], "odom"),
+            header=header(stamps[k] + odom_shift_s, "odom"),
             child_frame_id="base_footprint",
             pose=T["geometry_msgs/msg/PoseWithCovariance"](
                 pose=T["geometry_msgs/msg/Pose"](
@@ -139,23 +152,69 @@ def make_bag(
             ),
         )
 
-    tf = T["tf2_msgs/msg/TFMessage"](
-        transforms=[
-            transform("base_footprint", "base_link", (0.0, 0.0, 0.05), (0.0, 0.0, 0.0, 1.0)),
-            transform("base_link", "laser", (mx, my, 0.2), (1.0, 0.0, 0.0, 0.0)),  # roll pi
-        ]
-    )
-    messages = [(int(stamps[0] * 1e9) - 1, "/tf_static", "tf2_msgs/msg/TFMessage", tf)]
+    def mount_tf(dx: float = 0.0):
+        e = mount_yaw_error_rad / 2  # roll pi, then the yaw error about the base's z axis
+        quat = (math.cos(e), math.sin(e), 0.0, 0.0)
+        return transform("base_link", "laser", (mx + dx, my, 0.2), quat)
+
+    base = transform("base_footprint", "base_link", (0.0, 0.0, 0.05), (0.0, 0.0, 0.0, 1.0))
+    tfm = "tf2_msgs/msg/TFMessage"
+    first = int(stamps[0] * 1e9) - 1
+    messages = [(first, mount_topic, tfm, T[tfm](transforms=[base, mount_tf()]))]
+    if tf_mount_error_m is not None:
+        messages.append((first, "/tf", tfm, T[tfm](transforms=[base, mount_tf(tf_mount_error_m)])))
     for k in range(n_scans):
         ns = int(stamps[k] * 1e9)
         messages.append((ns, "/odom", "nav_msgs/msg/Odometry", odom_msg(k)))
         if defects and k == 20:
             messages.append((ns, "/odom", "nav_msgs/msg/Odometry", odom_msg(k)))
+        if mount_topic == "/tf":  # the moving part of the tree, beside the mount
+            x, y, th = odo[k]
+            q = (0.0, 0.0, math.sin(th / 2), math.cos(th / 2))
+            moving = transform("odom", "base_footprint", (x, y, 0.0), q)
+            messages.append((ns, "/tf", tfm, T[tfm](transforms=[moving, base, mount_tf()])))
         scan = scan_msg(31 if defects and k == 30 else 30 if defects and k == 31 else k)
         if defects and k == 10:
             scan.ranges = np.zeros(0, dtype=np.float32)
-        messages.append((ns + 1, "/scan", "sensor_msgs/msg/LaserScan", scan))
-    _write(path, kind, store, [m for m in messages if m[1] in topics])
+        for topic in ("/scan", *scan_copies):
+            messages.append((ns + 1, topic, "sensor_msgs/msg/LaserScan", scan))
+    wanted = set(topics) | set(scan_copies) | {mount_topic}
+    if tf_mount_error_m is not None:
+        wanted.add("/tf")
+    _write(path, kind, store, [m for m in messages if m[1] in wanted])
+    return path
+
+
+def without_definitions(path: Path) -> Path:
+    """A rosbag2 sqlite3 bag (``make_bag(..., "sqlite3")``) made as ROS 2 Humble writes
+    one: no message definitions, no type hashes, metadata version 5."""
+    import sqlite3
+
+    import yaml
+
+    db = next(path.glob("*.db3"))
+    con = sqlite3.connect(db)
+    con.executescript(
+        """
+        DROP TABLE message_definitions;
+        CREATE TABLE humble_topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL,
+            type TEXT NOT NULL, serialization_format TEXT NOT NULL,
+            offered_qos_profiles TEXT NOT NULL);
+        INSERT INTO humble_topics
+            SELECT id, name, type, serialization_format, offered_qos_profiles FROM topics;
+        DROP TABLE topics;
+        ALTER TABLE humble_topics RENAME TO topics;
+        UPDATE schema SET schema_version = 3;
+        """
+    )
+    con.commit()
+    con.close()
+    meta = yaml.safe_load((path / "metadata.yaml").read_text())
+    info = meta["rosbag2_bagfile_information"]
+    info["version"], info["ros_distro"] = 5, "humble"
+    for t in info["topics_with_message_count"]:
+        t["topic_metadata"].pop("type_description_hash", None)
+    (path / "metadata.yaml").write_text(yaml.safe_dump(meta))
     return path
 
 

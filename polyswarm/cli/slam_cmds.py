@@ -35,10 +35,17 @@ def slam_cmd(
     config: Path | None = typer.Option(None, help="TOML config."),
     profile: str | None = typer.Option(None, help="Worlds: " + PROFILE_HELP),
     scan_topic: str | None = typer.Option(
-        None, help="Bags: the sensor_msgs/LaserScan topic (default: the only one)."
+        None,
+        help="Bags: the sensor_msgs/LaserScan topic (default: the only one, else the one "
+        "named 'scan').",
     ),
     odom_topic: str | None = typer.Option(
         None, help="Bags: the nav_msgs/Odometry topic (default: the only one)."
+    ),
+    ros_distro: str = typer.Option(
+        "humble",
+        help="Bags: the ROS 2 distribution whose message definitions read a bag that has "
+        "none (rosbag2 written before Iron).",
     ),
 ) -> None:
     """Run PolySLAM; write map.polymap/.svg/.png, trajectory.tum, config.toml, metrics.json."""
@@ -69,7 +76,7 @@ def slam_cmd(
             prog.update(task, completed=done, total=total)
 
         if log is not None and is_bag(log):
-            run, cfg = runner.run_bag(log, cfg, report, scan_topic, odom_topic)
+            run, cfg = runner.run_bag(log, cfg, report, scan_topic, odom_topic, ros_distro)
         elif log is not None:
             n = IncrementNoise()
             noise = IncrementNoise(
@@ -122,6 +129,11 @@ def slam_cmd(
                 f"{m['occupied_cells_5cm']} ({m['odometry_occupied_cells_5cm']})",
             ),
             ("lidar mount from", m["mount"]),
+            ("mount check", m["mount_check"]["advice"] or "sharpest as given"),
+            (
+                "no return reported as",
+                f"{m['no_return']} ({100 * m['no_return_share']:.0f} % of beams)",
+            ),
             ("messages skipped", str(sum(m["skipped"].values()))),
         ]
     rows += [
@@ -145,6 +157,9 @@ def scan_cmd(
     config: Path | None = typer.Option(None, help="TOML config ([slam.mount] overrides tf)."),
     scan_topic: str | None = typer.Option(None, help="The sensor_msgs/LaserScan topic."),
     odom_topic: str | None = typer.Option(None, help="The nav_msgs/Odometry topic."),
+    ros_distro: str = typer.Option(
+        "humble", help="The ROS 2 distribution whose message definitions read a bag without."
+    ),
 ) -> None:
     """Check a lidar mount: one scan drawn in the robot's base frame (x forward, metres),
     with the mount polyswarm would use (tf, the config, or the default) printed.
@@ -158,13 +173,14 @@ def scan_cmd(
     import numpy as np
 
     from polyswarm.slam.scan import beam_angles, classify
-    from protocols.bags import choose_mount, read_bag
+    from protocols.bags import read_bag
+    from protocols.tf import choose_mount
 
     cfg = load_cfg(config, None)
-    data = read_bag(bag, scan_topic, odom_topic)
+    data = read_bag(bag, scan_topic, odom_topic, ros_distro)
     if index >= len(data.scans):
         raise PolyswarmError(f"--index {index}: the bag has {len(data.scans)} scans")
-    mount, source = choose_mount(cfg.slam.mount, data.mount, str(bag))
+    mount, source = choose_mount(cfg.slam.mount, data.mounts, str(bag))
     m = (mount.x_m, mount.y_m, mount.yaw_rad, mount.upside_down)
     scan = data.scans[index]
     valid = classify(scan)[0]

@@ -77,15 +77,20 @@ def agent_cmd(
     player = None
     if replay is not None:
         from polyswarm.runners.replay import BagPlayer, LogPlayer, start_player
-        from protocols.bags import choose_mount, is_bag
+        from protocols.bags import is_bag
+        from protocols.tf import choose_mount
 
         if is_bag(replay):
             # the bag's messages arrive as ROS 2 CDR, as from a robot through the bridge
             io = dataclasses.replace(cfg.agent, source="ros2", output="native")
             player = BagPlayer(replay, io, rate, scan_topic, odom_topic)
-            mount, _ = choose_mount(cfg.slam.mount, player.bag.mount, str(replay))
+            mount, _ = choose_mount(cfg.slam.mount, player.bag.mounts, str(replay))
+            lidar = dataclasses.replace(cfg.sim.lidar, out_of_range=player.bag.no_return)
             cfg = dataclasses.replace(
-                cfg, agent=io, slam=dataclasses.replace(cfg.slam, mount=mount)
+                cfg,
+                agent=io,
+                slam=dataclasses.replace(cfg.slam, mount=mount),
+                sim=dataclasses.replace(cfg.sim, lidar=lidar),
             )
         else:
             player = LogPlayer(replay, rate)

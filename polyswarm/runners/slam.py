@@ -8,6 +8,7 @@ with the estimated, reference and odometry trajectories, the map and timings;
 from __future__ import annotations
 
 import json
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -25,9 +26,12 @@ from polyswarm.io.carmen import read_carmen, real_odometry
 from polyswarm.io.tum import write_tum
 from polyswarm.polymap import GridPolyMap, VectorType
 from polyswarm.se2 import compose
+from polyswarm.slam.mountcheck import check_mount
 from polyswarm.slam.odometry import IncrementNoise, OdometryBuffer, noisy_odometry
 from polyswarm.slam.polyslam import PolySlam
-from polyswarm.slam.scan import deskew_motion
+from polyswarm.slam.scan import classify, deskew_motion
+
+log = logging.getLogger(__name__)
 
 Progress = Callable[[float, float], None]  # (done, total)
 
@@ -80,8 +84,8 @@ def run_log(
     """PolySLAM over a CARMEN log, on its real odometry or on synthetic noise.
 
     Raises DataFormatError for ``OdometrySource.LOG`` on a log without raw ODOM lines."""
-    log = read_carmen(path)
-    ref = log.reference
+    carmen = read_carmen(path)
+    ref = carmen.reference
     if odometry == OdometrySource.LOG:
         odom = real_odometry(log)
         described = "the log's real wheel odometry (ODOM lines)"
@@ -91,7 +95,7 @@ def run_log(
     slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=ref[0], keep_trajectory=True)
     est, kf_ms, stages = [], [], []
     spent = 0.0
-    for k, s in enumerate(log.scans):
+    for k, s in enumerate(carmen.scans):
         t0 = time.perf_counter()
         step = slam.process(s.scan, odom[k])
         spent += time.perf_counter() - t0
@@ -100,8 +104,8 @@ def run_log(
             kf_ms.append(step.timings_ms["total"])
             stages.append(step.timings_ms)
         if progress:
-            progress(k + 1, len(log.scans))
-    stamps = np.array([s.stamp for s in log.scans])
+            progress(k + 1, len(carmen.scans))
+    stamps = np.array([s.stamp for s in carmen.scans])
     final, final_map, rebuild_s = finish(slam)
     spent += rebuild_s
     return SlamRun(
@@ -117,9 +121,9 @@ def run_log(
         False,
         {
             "log": str(path),
-            "scans": len(log.scans),
+            "scans": len(carmen.scans),
             "timestamps": "synthesized (scan index x 1 s)"
-            if log.timestamps_synthesized
+            if carmen.timestamps_synthesized
             else "from the log",
             "odometry": str(odometry),
             "odometry_noise": described,
@@ -141,32 +145,41 @@ def run_bag(
     progress: Progress | None = None,
     scan_topic: str | None = None,
     odom_topic: str | None = None,
+    ros_distro: str = "humble",
 ) -> tuple[SlamRun, Config]:
-    """PolySLAM over a recorded ROS bag (ROS 1, or rosbag2 in mcap or sqlite3): its scans
-    with its wheel odometry at each scan's time, each sweep de-skewed; the lidar's mount
-    from ``/tf_static`` unless the config sets one. No ground truth: the run is judged by
-    the sharpness of its map against odometry alone (``evaluation.occupied_cells``).
-    Returns the run and the config it used (with the mount)."""
-    from protocols.bags import choose_mount, read_bag
+    """PolySLAM over a recorded ROS bag (ROS 1, or rosbag2 in mcap or sqlite3; one without
+    message definitions read with ``ros_distro``'s): its scans with its wheel odometry at
+    each scan's time, each sweep de-skewed; the lidar's mount from tf unless the config
+    sets one (``protocols.tf``), checked against the lidar turned by pi and mirrored
+    (``slam.mountcheck``); the driver's way of reporting no return read off the scans.
+    No ground truth: the run is judged by the sharpness of its map against odometry alone
+    (``evaluation.maps.occupied_cells``). Returns the run and the config it used."""
+    from protocols.bags import read_bag
+    from protocols.tf import choose_mount
 
-    bag = read_bag(path, scan_topic, odom_topic)
-    mount, mount_from = choose_mount(cfg.slam.mount, bag.mount, bag.path)
-    cfg = with_overrides(cfg, {"slam": {"mount": config_to_dict(mount)}})
+    bag = read_bag(path, scan_topic, odom_topic, ros_distro)
+    mount, mount_from = choose_mount(cfg.slam.mount, bag.mounts, bag.path)
+    overrides = {"mount": config_to_dict(mount)}
+    cfg = with_overrides(
+        cfg, {"slam": overrides, "sim": {"lidar": {"out_of_range": bag.no_return}}}
+    )
     odometry = OdometryBuffer(capacity=len(bag.odometry) + 1)
     for t, x, y, th in bag.odometry:
         odometry.add(t, (x, y, th))
-    t_first, t_last = bag.odometry[0, 0], bag.odometry[-1, 0]
-    scans = [
-        s
-        for s in bag.scans
-        if t_first - MAX_ODOM_GAP_S <= s.stamp and s.end_stamp <= t_last + MAX_ODOM_GAP_S
-    ]
-    if len(scans) < len(bag.scans):
-        bag.skipped["scans outside the odometry's time"] += len(bag.scans) - len(scans)
-    if not scans:
-        raise DataFormatError(f"{bag.path}: no scan lies within the odometry's time")
+    scans = _scans_with_odometry(bag)
+    checked = check_mount(
+        scans, np.array([odometry.at(s.end_stamp) for s in scans]), _mount_tuple(cfg)
+    )
+    if checked.better:
+        log.warning("%s: %s", bag.path, checked.advice)
     start = odometry.at(scans[0].end_stamp)
-    slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=start, keep_trajectory=True)
+    slam = PolySlam(
+        cfg.slam,
+        cfg.map.cell_size_m,
+        initial_pose=start,
+        keep_trajectory=True,
+        out_of_range=cfg.sim.lidar.out_of_range,
+    )
     est, odo, kf_ms, stages = [], [], [], []
     spent = 0.0
     for k, scan in enumerate(scans):
@@ -183,8 +196,7 @@ def run_bag(
             progress(k + 1, len(scans))
     final, final_map, rebuild_s = finish(slam)
     stamps = np.array([s.end_stamp for s in scans])
-    m = cfg.slam.mount
-    mount_t = (m.x_m, m.y_m, m.yaw_rad, m.upside_down)
+    mount_t = _mount_tuple(cfg)
     info = {
         "bag": str(path),
         "scan_topic": bag.scan_topic,
@@ -192,6 +204,12 @@ def run_bag(
         "scans": len(scans),
         "skipped": dict(bag.skipped),
         "mount": mount_from,
+        "mount_tf_note": bag.mounts.disagreement(),
+        "mount_check": {"occupied_cells_5cm": checked.cells, "advice": checked.advice},
+        "scan_topic_note": bag.scan_topic_note,
+        "no_return": bag.no_return,
+        "no_return_share": bag.no_return_share,
+        "message_definitions": bag.definitions,
         "odometry": "the bag's wheel odometry",
         "occupied_cells_5cm": evm.occupied_cells(scans, final, mount_t),
         "odometry_occupied_cells_5cm": evm.occupied_cells(scans, np.array(odo), mount_t),
@@ -213,6 +231,39 @@ def run_bag(
         stage_ms=stages,
     )
     return run, cfg
+
+
+def _mount_tuple(cfg: Config) -> tuple[float, float, float, bool]:
+    m = cfg.slam.mount
+    return (m.x_m, m.y_m, m.yaw_rad, m.upside_down)
+
+
+def _scans_with_odometry(bag) -> list:
+    """The bag's scans within the odometry's time and with at least one valid return
+    (the rest counted in ``bag.skipped``); DataFormatError when none is left."""
+    t_first, t_last = bag.odometry[0, 0], bag.odometry[-1, 0]
+    scans = [
+        s
+        for s in bag.scans
+        if t_first - MAX_ODOM_GAP_S <= s.stamp and s.end_stamp <= t_last + MAX_ODOM_GAP_S
+    ]
+    if len(scans) < len(bag.scans):
+        bag.skipped["scans outside the odometry's time"] += len(bag.scans) - len(scans)
+    if not scans:
+        raise DataFormatError(
+            f"{bag.path}: no scan lies within the odometry's time (scans "
+            f"{bag.scans[0].stamp:.1f}-{bag.scans[-1].end_stamp:.1f} s, odometry "
+            f"{t_first:.1f}-{t_last:.1f} s): are they from the same recording?"
+        )
+    seeing = [s for s in scans if classify(s, bag.no_return)[0].any()]
+    if not seeing:
+        raise DataFormatError(
+            f"{bag.path}: no sweep on {bag.scan_topic} holds a valid return (every beam "
+            f"outside [range_min, range_max)): is it the lidar's topic?"
+        )
+    if len(seeing) < len(scans):
+        bag.skipped["scans without a valid return"] += len(scans) - len(seeing)
+    return seeing
 
 
 def run_world(
