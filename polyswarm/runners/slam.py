@@ -25,6 +25,7 @@ from polyswarm.evaluation import trajectory as evt
 from polyswarm.io.carmen import read_carmen, real_odometry
 from polyswarm.io.tum import write_tum
 from polyswarm.polymap import GridPolyMap, VectorType
+from polyswarm.profiles import DEFAULT_PROFILE, RECORDING_SLAM
 from polyswarm.se2 import compose
 from polyswarm.slam.mountcheck import check_mount
 from polyswarm.slam.odometry import IncrementNoise, OdometryBuffer, noisy_odometry
@@ -87,7 +88,7 @@ def run_log(
     carmen = read_carmen(path)
     ref = carmen.reference
     if odometry == OdometrySource.LOG:
-        odom = real_odometry(log)
+        odom = real_odometry(carmen)
         described = "the log's real wheel odometry (ODOM lines)"
     else:
         odom = noisy_odometry(ref, noise, seed)
@@ -149,15 +150,19 @@ def run_bag(
 ) -> tuple[SlamRun, Config]:
     """PolySLAM over a recorded ROS bag (ROS 1, or rosbag2 in mcap or sqlite3; one without
     message definitions read with ``ros_distro``'s): its scans with its wheel odometry at
-    each scan's time, each sweep de-skewed; the lidar's mount from tf unless the config
-    sets one (``protocols.tf``), checked against the lidar turned by pi and mirrored
-    (``slam.mountcheck``); the driver's way of reporting no return read off the scans.
-    No ground truth: the run is judged by the sharpness of its map against odometry alone
-    (``evaluation.maps.occupied_cells``). Returns the run and the config it used."""
+    each scan's time, each sweep de-skewed, every scan counted as evidence (the values of
+    ``profiles.RECORDING_SLAM`` unless the config names a robot profile); the lidar's
+    mount from tf unless the config sets one (``protocols.tf``), checked against the lidar
+    turned by pi and mirrored (``slam.mountcheck``); the driver's way of reporting no
+    return read off the scans. No ground truth: the run is judged by the sharpness of its
+    map against odometry alone (``evaluation.maps.occupied_cells``). Returns the run and
+    the config it used."""
     from protocols.bags import read_bag
     from protocols.tf import choose_mount
 
     bag = read_bag(path, scan_topic, odom_topic, ros_distro)
+    if cfg.profile == DEFAULT_PROFILE:  # a robot not named: a real lidar (profiles.py)
+        cfg = with_overrides(cfg, {"slam": RECORDING_SLAM})
     mount, mount_from = choose_mount(cfg.slam.mount, bag.mounts, bag.path)
     overrides = {"mount": config_to_dict(mount)}
     cfg = with_overrides(
