@@ -247,6 +247,19 @@ class LidarMount:
 
 
 @dataclass(frozen=True)
+class EvidenceConfig:
+    """The evidence behind the map (``polyswarm.slam.evidence``): every scan counted per
+    cell, and each keyframe polygon made as the view of those counts from its lidar.
+    For lidars that lose beams in runs (the low-cost ones labs own, and real recordings,
+    which ``polyswarm slam BAG`` always reads so); off for the thesis's clean sensor."""
+
+    enabled: bool = False
+    resolution_m: float = num(0.05, 0.01, 0.5)  # the evidence grid's cell
+    # view rays per lidar beam: more finds small obstacles between the beams at range
+    oversample: int = num(2, 1, 8)
+
+
+@dataclass(frozen=True)
 class SlamConfig:
     keyframe_distance_m: float = positive(0.4, 100.0)
     keyframe_angle_rad: float = num(0.3490658503988659, 0.0, TWO_PI, lo_open=True)  # 20 deg
@@ -304,6 +317,7 @@ class SlamConfig:
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)
     mount: LidarMount = field(default_factory=LidarMount)
+    evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
 
 
 @dataclass(frozen=True)

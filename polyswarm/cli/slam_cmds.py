@@ -33,7 +33,11 @@ def slam_cmd(
     ),
     speed: float = typer.Option(1.0, help="Worlds: driving speed along the route, m/s."),
     config: Path | None = typer.Option(None, help="TOML config."),
-    profile: str | None = typer.Option(None, help="Worlds: " + PROFILE_HELP),
+    profile: str | None = typer.Option(
+        None,
+        help="Worlds: the robot simulated; bags: the robot that recorded it (its SLAM "
+        "values; default: those of a real low-cost lidar). " + PROFILE_HELP,
+    ),
     scan_topic: str | None = typer.Option(
         None,
         help="Bags: the sensor_msgs/LaserScan topic (default: the only one, else the one "
@@ -59,8 +63,10 @@ def slam_cmd(
 
     if (log is None) == (world is None):
         raise PolyswarmError("give either a LOG or --world (not both)")
-    if log is not None and profile is not None:
-        raise PolyswarmError("--profile is for --world runs: a log brings its own sensor")
+    if log is not None and not is_bag(log) and profile is not None:
+        raise PolyswarmError(
+            "--profile is for --world runs and bags: a CARMEN log brings its own sensor"
+        )
     cfg = load_cfg(config, profile)
     with Progress(
         TextColumn("{task.description}"),

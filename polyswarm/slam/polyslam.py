@@ -45,6 +45,7 @@ from polyswarm.polymap import (
     snap_polygon,
 )
 from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
+from polyswarm.slam.evidence import EvidenceGrid, KeyframeRays, view_points
 from polyswarm.slam.follow import Atlas, CorrectionOp, correct, pose_of
 from polyswarm.slam.icp import IcpResult, PointToVectorIcp
 from polyswarm.slam.keyframe import keyframe_polygon
@@ -179,6 +180,10 @@ class PolySlam:
         self.atlas = Atlas()
         self._frames: dict[int, np.ndarray] = {}  # keyframe -> its atlas frame, seen from it
         self._follows = cfg.map_follows_graph
+        # the evidence behind the map: every scan's rays, kept per keyframe (None: off)
+        self.evidence: KeyframeRays | None = None
+        if cfg.evidence.enabled:
+            self.evidence = KeyframeRays(EvidenceGrid(cfg.evidence.resolution_m))
         self._correction: CorrectionOp | None = None
         self.corrections: list[dict] = []
         self._anchor: np.ndarray | None = None  # a frame to move into at the next scan
@@ -213,6 +218,8 @@ class PolySlam:
         self.atlas = Atlas()
         self._frames = {}
         self._follows = False
+        if self.evidence is not None:  # the scans behind the persisted map are gone
+            self.evidence = KeyframeRays(EvidenceGrid(self.cfg.evidence.resolution_m))
         self.graph = PoseGraph()
         self._steps = []
         self._kf_pose = self._kf_odom = None
@@ -236,6 +243,8 @@ class PolySlam:
         frame, self._anchor = self._anchor, None
         self._anchor_base = self.map.version
         self.graph.move_all(frame)
+        if self.evidence is not None:
+            self.evidence.move_to(self.graph.poses)
         if self.store:
             self.store.set_poses(np.array([compose(frame, k.pose) for k in self.store.keyframes]))
         self.pose = compose(frame, self.pose)
@@ -319,6 +328,11 @@ class PolySlam:
             due = self.selector.moved(odom, NOVELTY_MIN_STEP) and self._sees_new_space(points, pred)
         if not due:
             self.pose, self.odom = pred, odom
+            if self.evidence is not None and len(self.graph):  # seen from its keyframe
+                node = len(self.graph) - 1
+                self.evidence.add(
+                    node, self.graph.poses[node], relative(self._kf_pose, pred), points
+                )
             if self.keep_trajectory:  # as seen from its keyframe, to follow corrections
                 self._steps.append((len(self.graph) - 1, relative(self._kf_pose, pred)))
             return SlamStep(pred, False)
@@ -348,10 +362,24 @@ class PolySlam:
         if self._optimise:  # priors set and no loop closure optimised the graph
             pose = self._optimise_graph()
         t["loop"] = time.perf_counter()
-        # 5. keyframe polygon, closed through the sensor centre
-        kf = keyframe_polygon(
-            points, pose, self.cfg.obstacle_max_gap_m, self.cfg.obstacle_gap_beams
-        )
+        # 5. keyframe polygon, closed through the sensor centre: of the scan's points, or
+        #    of the view of every scan's evidence from the keyframe's lidar
+        seen = points
+        if self.evidence is not None:
+            node = len(self.graph) - 1
+            self.evidence.add(node, pose, np.zeros(3), points)
+            ev = self.cfg.evidence
+            seen = view_points(
+                self.evidence.grid,
+                points,
+                pose,
+                scan.fov,
+                len(scan.ranges),
+                scan.range_max,
+                self.cfg.frontier_range_m,
+                ev.oversample,
+            )
+        kf = keyframe_polygon(seen, pose, self.cfg.obstacle_max_gap_m, self.cfg.obstacle_gap_beams)
         t["polygon"] = time.perf_counter()
         # 6. refinement by line fitting (always a valid simple polygon)
         kf, how = refine_polygon(kf, self.cfg.refine)
@@ -568,6 +596,8 @@ class PolySlam:
         self._optimise = False
         poses = self.graph.optimise()
         self.store.set_poses(poses[:-1])
+        if self.evidence is not None:
+            self.evidence.move_to(poses)
         if self._follows:
             self._follow()
         return poses[-1]

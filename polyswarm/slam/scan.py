@@ -91,6 +91,8 @@ class ScanPoints:
     valid: np.ndarray  # (n,) bool: a real return from an obstacle
     full_circle: bool  # beams cover 360 degrees: the polygon closes without the centre
     origin: np.ndarray = field(default_factory=lambda: np.zeros(2))  # sensor, robot frame
+    # (n,) bool: a beam without a return, cut where free space is trusted to reach
+    no_return: np.ndarray | None = None
 
 
 def beam_angles(scan: LaserScan, mount: tuple[float, float, float, bool]) -> np.ndarray:
@@ -167,17 +169,19 @@ def scan_to_points(
     origin = np.array([mx, my], dtype=float)
     # a partial field of view is ordered from the middle of what it does not see
     gap = math.atan2(np.sin(a).mean(), np.cos(a).mean()) + math.pi
-    xy, valid, full = _around_sensor(xy[keep], valid[keep], origin, scan, gap)
-    return ScanPoints(xy, valid, full, origin)
+    idx, full = _around_sensor(xy[keep], origin, scan, gap)
+    return ScanPoints(xy[keep][idx], valid[keep][idx], full, origin, no_return[keep][idx])
 
 
 def _around_sensor(
-    xy: np.ndarray, valid: np.ndarray, origin: np.ndarray, scan: LaserScan, gap: float
-) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Points in counter-clockwise order around the sensor (a star-shaped, hence simple,
-    polygon), starting after the direction ``gap``; where a full circle taken while
-    turning overlaps itself, the older beams go."""
+    xy: np.ndarray, origin: np.ndarray, scan: LaserScan, gap: float
+) -> tuple[np.ndarray, bool]:
+    """The points' indices in counter-clockwise order around the sensor (a star-shaped,
+    hence simple, polygon), starting after the direction ``gap``; where a full circle
+    taken while turning overlaps itself, the older beams go. And whether they close a
+    full circle."""
     bearing = np.arctan2(xy[:, 1] - origin[1], xy[:, 0] - origin[0])
+    idx = np.arange(len(xy))
     step = abs(scan.angle_increment)
     full = step * len(scan.ranges) >= 2 * np.pi - 1e-6
     if full and len(bearing) > 2:
@@ -186,10 +190,10 @@ def _around_sensor(
             turn = -turn
         if turn[-1] - turn[0] > 2 * np.pi - step / 2:  # the last beams cover the first ones
             keep = turn > turn[-1] - 2 * np.pi + step / 2
-            xy, valid, bearing, turn = xy[keep], valid[keep], bearing[keep], turn[keep]
+            idx, bearing, turn = idx[keep], bearing[keep], turn[keep]
         full = bool(turn[-1] - turn[0] >= 2 * np.pi - 1.5 * step)
     order = np.argsort((bearing - gap) % (2 * np.pi), kind="stable")
-    return xy[order], valid[order], full
+    return idx[order], full
 
 
 def deskew_motion(scan: LaserScan, odom_at) -> np.ndarray | None:
