@@ -100,7 +100,23 @@ class LidarConfig:
     # zero-mean Gaussian range noise: std noise_sigma_m + noise_sigma_per_m x range
     noise_sigma_m: float = num(0.01, 0.0, 1.0)
     noise_sigma_per_m: float = num(0.0, 0.0, 0.2)
-    dropout_prob: float = num(0.0, 0.0, 1.0, hi_open=True)  # a beam returns nothing valid
+    # How the lidar fails (``sim.lidar.measure``; the profiles' figures are fitted to real
+    # recordings, ``polyswarm bench lidar``). A beam that meets a surface at range r and
+    # incidence a (from the surface's normal) returns nothing with probability
+    #   1 - (1 - p_range) (1 - p_incidence), p_range rising from dropout_prob near the
+    #   sensor to dropout_far_prob at range_max (a logistic step at dropout_far_from share
+    #   of range_max), p_incidence = dropout_grazing_prob x ((a - 45 deg) / 35 deg)^2 above
+    #   45 degrees (1 from 80);
+    # a dark or glass surface with dark_dropout_prob; dropouts come in runs of about
+    # dropout_run_beams (correlated along the sweep); at an edge between two surfaces a
+    # return falls between them with mixed_pixel_prob
+    dropout_prob: float = num(0.0, 0.0, 1.0, hi_open=True)
+    dropout_far_prob: float = num(0.0, 0.0, 1.0, hi_open=True)
+    dropout_far_from: float = num(0.5, 0.0, 1.0)
+    dropout_grazing_prob: float = num(0.0, 0.0, 1.0)
+    dark_dropout_prob: float = num(0.0, 0.0, 1.0)
+    dropout_run_beams: float = num(1.0, 1.0, 1000.0)
+    mixed_pixel_prob: float = num(0.0, 0.0, 1.0)
     out_of_range: str = "inf"  # OutOfRange: how a beam with no return is reported
     # the beams of a scan are taken one after the other over the sweep (1 / rate_hz) while
     # the robot moves, as a spinning lidar does; false: all at one instant
@@ -146,6 +162,10 @@ class SimConfig:
     # pybullet rayTestBatch threads: 0 = every core (rays are independent, so the scans
     # stay bit-identical; 1.3-1.7x faster on 2 cores), 1 = the caller's thread only.
     raycast_threads: int = num(0, 0, 256)
+    # share of the walls' length that is glass or black (doors, cabinets, furniture), in
+    # stretches of 0.5-2 m drawn per world from the seed; each lidar profile says how
+    # often it sees them (sim.lidar.dark_dropout_prob)
+    dark_surface_share: float = num(0.1, 0.0, 1.0)
     robot: RobotConfig = field(default_factory=RobotConfig)
     lidar: LidarConfig = field(default_factory=LidarConfig)
     odometry_noise: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)

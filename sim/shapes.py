@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
+import shapely.ops
 from shapely.geometry import LineString, Point, box
 
 from polyswarm.errors import SimulationError
@@ -72,3 +73,26 @@ def world_from_walls(
 
 def square(x0, y0, x1, y1):
     return [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)]
+
+
+DARK_STRETCH_M = (0.5, 2.0)  # a glass door, a black cabinet: how long a dark stretch is
+DARK_DEPTH_M = 0.05  # a hit this close to a dark stretch is on it
+
+
+def dark_surfaces(world: World, share: float, seed: int) -> shapely.Geometry:
+    """Stretches of the walls' outline, about ``share`` of its length in pieces of 0.5-2 m
+    (seeded), that are glass or black: a thin band along them (empty for share 0)."""
+    if share <= 0:
+        return shapely.Polygon()
+    rng = np.random.default_rng([seed, 7])
+    pieces = []
+    for ring in shapely.get_rings(shapely.get_parts(world.walls)):
+        length, at = ring.length, 0.0
+        while at < length:
+            step = float(rng.uniform(*DARK_STRETCH_M))
+            if rng.random() < share:
+                pieces.append(shapely.ops.substring(ring, at, min(at + step, length)))
+            at += step
+    if not pieces:
+        return shapely.Polygon()
+    return shapely.union_all(shapely.buffer(np.array(pieces, dtype=object), DARK_DEPTH_M))

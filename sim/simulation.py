@@ -37,8 +37,8 @@ from pybullet_utils.bullet_client import BulletClient
 from polyswarm.config import SimConfig
 from polyswarm.errors import SimulationError
 from polyswarm.slam.scan import LaserScan
-from sim.lidar import BeamSchedule, beam_angles, measure
-from sim.shapes import WALL_HEIGHT_M, World
+from sim.lidar import BeamSchedule, BeamsSeen, beam_angles, measure
+from sim.shapes import WALL_HEIGHT_M, World, dark_surfaces
 
 log = logging.getLogger(__name__)
 
@@ -192,6 +192,10 @@ class Simulation:
         self._cos, self._sin = np.cos(self.angles), np.sin(self.angles)
         self._sweep = BeamSchedule.make(config.lidar, self.angles, self.scan_every, self.dt)
         self._ranges = np.full((n_robots, len(self.angles)), np.inf)  # the sweep so far
+        self._incidence = np.full((n_robots, len(self.angles)), np.nan)  # ... its incidences
+        self._on_dark = np.zeros((n_robots, len(self.angles)), dtype=bool)  # ... dark surfaces
+        self._dark = dark_surfaces(world, config.dark_surface_share, config.seed)
+        shapely.prepare(self._dark)
         self._prev = [r.pose.copy() for r in self.robots]  # poses before the current step
 
     # -- setup --------------------------------------------------------------------------
@@ -325,6 +329,8 @@ class Simulation:
         steps = int(state["steps"]) + max(0, steps_ahead)
         self.steps = -(-steps // self.scan_every) * self.scan_every  # a sweep starts anew
         self._ranges[:] = np.inf
+        self._incidence[:] = np.nan
+        self._on_dark[:] = False
         self._prev = [r.pose.copy() for r in self.robots]
 
     # -- stepping -----------------------------------------------------------------------
@@ -339,11 +345,18 @@ class Simulation:
         beams = np.nonzero(self._sweep.step == in_sweep)[0]
         if len(beams):  # the beams taken during this step, from where the robots were then
             frac = self._sweep.frac[beams]
-            for k, ranges in enumerate(self._cast(range(len(self.robots)), beams, frac)):
-                self._ranges[k, beams] = ranges
+            for k, seen in enumerate(self._cast(range(len(self.robots)), beams, frac)):
+                self._ranges[k, beams] = seen.ranges
+                self._incidence[k, beams] = seen.incidence
+                self._on_dark[k, beams] = seen.dark
         if self.steps % self.scan_every == 0:
             start = self.time - self._sweep.scan_time_s if self._sweep.time_increment_s else None
-            return [self._finish(k, self._ranges[k], start) for k in range(len(self.robots))]
+            return [
+                self._finish(
+                    k, BeamsSeen(self._ranges[k], self._incidence[k], self._on_dark[k]), start
+                )
+                for k in range(len(self.robots))
+            ]
         return []
 
     def run(self, seconds: float) -> Iterator[ScanEvent]:
@@ -429,11 +442,12 @@ class Simulation:
         which = list(range(len(self.robots)) if which is None else which)
         every = np.arange(len(self.angles))
         cast = self._cast(which, every, np.ones(len(every)))
-        return [self._finish(k, ranges, None) for k, ranges in zip(which, cast, strict=True)]
+        return [self._finish(k, seen, None) for k, seen in zip(which, cast, strict=True)]
 
-    def _cast(self, which, beams: np.ndarray, frac: np.ndarray) -> list[np.ndarray]:
-        """True ranges (inf: nothing within range) of the given beams of each robot in
-        ``which``, each beam from the robot's pose at ``frac`` of the last step."""
+    def _cast(self, which, beams: np.ndarray, frac: np.ndarray) -> list[BeamsSeen]:
+        """What the given beams of each robot in ``which`` meet (true ranges, inf: nothing
+        within range; incidences; dark surfaces), each beam from the robot's pose at
+        ``frac`` of the last step."""
         lid = self.cfg.lidar
         r0 = RAY_START_M
         frm, to, rays = [], [], []
@@ -459,18 +473,30 @@ class Simulation:
             raise SimulationError(f"pybullet cast {len(res)} of {len(frm)} rays")
         frac_hit = np.fromiter((h[2] for h in res), dtype=float, count=len(res))
         hit = np.fromiter((h[0] >= 0 for h in res), dtype=bool, count=len(res))
+        normal = np.array([h[4][:2] for h in res], dtype=float).reshape(-1, 2)
         out, n = [], len(beams)
         for i, k in enumerate(which):
-            f, h = frac_hit[i * n : (i + 1) * n], hit[i * n : (i + 1) * n]
+            part = slice(i * n, (i + 1) * n)
+            f, h = frac_hit[part], hit[part]
             walls = np.where(h, r0 + f * (lid.range_max_m - r0), np.inf)
-            out.append(np.minimum(walls, self._robot_hits(*rays[i], k)))
+            x, y, dx, dy = rays[i]
+            cos = np.abs(normal[part, 0] * dx + normal[part, 1] * dy)
+            incidence = np.where(h, np.arccos(np.clip(cos, 0.0, 1.0)), np.nan)
+            t = np.where(h, walls, 0.0)
+            dark = h & shapely.intersects_xy(self._dark, x + t * dx, y + t * dy)
+            robots = self._robot_hits(x, y, dx, dy, k)
+            nearer = robots < walls  # another robot: met head-on, not dark
+            ranges = np.minimum(walls, robots)
+            out.append(
+                BeamsSeen(ranges, np.where(nearer, 0.0, incidence), np.where(nearer, False, dark))
+            )
         return out
 
-    def _finish(self, k: int, true_ranges: np.ndarray, start: float | None) -> ScanEvent:
+    def _finish(self, k: int, seen: BeamsSeen, start: float | None) -> ScanEvent:
         """The scan robot k's driver publishes; ``start``: its first beam's time (a
         rolling sweep), None: every beam now."""
         lid = self.cfg.lidar
-        ranges = measure(true_ranges, lid, self._lidar_rng[k])
+        ranges = measure(seen, lid, self._lidar_rng[k])
         rolling = start is not None
         scan = LaserScan(
             ranges,

@@ -242,6 +242,112 @@ def _correction_row(name: str, m: dict) -> tuple[str, str]:
     )
 
 
+@bench_app.command("lidar")
+def bench_lidar(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    simulated: str = typer.Option(
+        "neato,hokuyo,turtlebot4,turtlebot3",
+        help="Profiles whose simulated lidar is measured too, on the office and furnished worlds.",
+    ),
+) -> None:
+    """How real low-cost lidars fail, fitted on the shared recordings (by range, incidence,
+    runs, mixed pixels, noise), and how the simulated profiles fail indoors."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import lidarfit
+    from polyswarm.data import shared_data_dir
+
+    with Console(stderr=True).status("fitting the shared recordings"):
+        res = {"recordings": lidarfit.run(shared_data_dir() / "bags"), "simulated": {}}
+        for profile in _names(simulated):
+            res["simulated"][profile] = {
+                w: lidarfit.simulated(profile, w) for w in ("office", "furnished")
+            }
+    _save(save, res)
+    rows = []
+    for name, r in res["recordings"].items():
+        by_range = ", ".join(
+            f"{k} m {100 * v['share']:.0f} %" for k, v in r["drop_by_range"].items() if v
+        )
+        by_inc = ", ".join(
+            f"{k} deg {100 * v['share']:.0f} %" for k, v in r["drop_by_incidence_deg"].items() if v
+        )
+        rows += [
+            (f"{name}: no return, all beams", f"{100 * r['no_return_share']:.0f} %"),
+            (f"{name}: no return by range", by_range),
+            (f"{name}: no return by incidence", by_inc),
+            (
+                f"{name}: invalid runs, median beams; mixed pixels at edges",
+                f"{r['invalid_run_beams']['median']:.0f}; "
+                f"{100 * (r['mixed_pixel_share_at_edges'] or 0):.1f} %",
+            ),
+        ]
+    for profile, by in res["simulated"].items():
+        for w, r in by.items():
+            rows.append(
+                (
+                    f"simulated {profile}, {w}: no return; invalid runs, median beams",
+                    f"{100 * r['no_return_share']:.0f} %; {r['invalid_run_beams_median']:.0f}",
+                )
+            )
+    _emit(res, as_json, "Low-cost lidars, real and simulated", rows)
+
+
+@bench_app.command("maps")
+def bench_maps(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    worlds: str = typer.Option(
+        "office,rooms,furnished,data:nav2-depot,data:nav2-warehouse",
+        help="Simulated worlds, comma-separated ('' for none).",
+    ),
+    profiles: str = typer.Option(
+        "thesis,turtlebot3,turtlebot4,hokuyo,neato", help="Robot profiles, comma-separated."
+    ),
+    recordings: bool = typer.Option(True, help="The shared recordings (../shared/data/bags)."),
+    seed: int = typer.Option(0, help="Seed of the simulated sensors and odometry."),
+) -> None:
+    """Maps against their references: each shared recording's PolyMap against the
+    log-odds grid of the same scans at the same poses; each simulated world and profile
+    against the ground truth."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import maps
+
+    bags = None
+    if recordings:
+        from polyswarm.data import shared_data_dir
+
+        bags = shared_data_dir() / "bags"
+    with Console(stderr=True).status("maps") as status:
+        res = maps.run(bags, _names(worlds), _names(profiles), seed, status.update)
+    _save(save, res)
+    rows = []
+    for name, r in res["recordings"].items():
+        e, k = r["evidence"], r["keyframes_alone"]
+        rows.append(
+            (
+                f"{name} ({r['lidar']}): wall recall, walls typed frontier, explored where "
+                "no beam went, explored / grid free (keyframes alone)",
+                f"{e['wall_recall']:.2f}, {100 * e['walls_as_frontier']:.1f} %, "
+                f"{100 * e['explored_unseen_share']:.1f} %, {e['explored_over_free']:.2f} "
+                f"({k['wall_recall']:.2f}, {100 * k['walls_as_frontier']:.1f} %, "
+                f"{100 * k['explored_unseen_share']:.1f} %, {k['explored_over_free']:.2f})",
+            )
+        )
+    for spec, by in res["worlds"].items():
+        for profile, r in by.items():
+            rows.append(
+                (
+                    f"{spec}, {profile}: IoU, ghost walls, explored beyond walls",
+                    f"{r['map_iou']:.3f}, {100 * r['ghost_walls']:.1f} %, "
+                    f"{100 * r['explored_beyond_walls']:.1f} %",
+                )
+            )
+    _emit(res, as_json, "Maps against their references", rows)
+
+
 @bench_app.command("slam")
 def bench_slam(
     as_json: bool = JSON_OPT,

@@ -147,11 +147,12 @@ def run_bag(
     scan_topic: str | None = None,
     odom_topic: str | None = None,
     ros_distro: str = "humble",
+    recording_slam: dict = RECORDING_SLAM,
 ) -> tuple[SlamRun, Config]:
     """PolySLAM over a recorded ROS bag (ROS 1, or rosbag2 in mcap or sqlite3; one without
     message definitions read with ``ros_distro``'s): its scans with its wheel odometry at
     each scan's time, each sweep de-skewed, every scan counted as evidence (the values of
-    ``profiles.RECORDING_SLAM`` unless the config names a robot profile); the lidar's
+    ``recording_slam``, ``profiles.RECORDING_SLAM``, unless the config names a robot); the lidar's
     mount from tf unless the config sets one (``protocols.tf``), checked against the lidar
     turned by pi and mirrored (``slam.mountcheck``); the driver's way of reporting no
     return read off the scans. No ground truth: the run is judged by the sharpness of its
@@ -162,7 +163,7 @@ def run_bag(
 
     bag = read_bag(path, scan_topic, odom_topic, ros_distro)
     if cfg.profile == DEFAULT_PROFILE:  # a robot not named: a real lidar (profiles.py)
-        cfg = with_overrides(cfg, {"slam": RECORDING_SLAM})
+        cfg = with_overrides(cfg, {"slam": recording_slam})
     mount, mount_from = choose_mount(cfg.slam.mount, bag.mounts, bag.path)
     overrides = {"mount": config_to_dict(mount)}
     cfg = with_overrides(
