@@ -152,3 +152,43 @@ def test_sparse_returns_seen_by_many_sweeps_make_walls_not_frontiers():
     without = np.mean([_dropout_room(base, s, 0.3) for s in range(3)])
     with_evidence = np.mean([_dropout_room(on, s, 0.3) for s in range(3)])
     assert with_evidence >= 0.9 > without
+
+
+def test_a_cell_knows_where_its_returns_fell_inside_it():
+    ev = EvidenceGrid(0.05)
+    ev.add(rays((0.01, 0.01), [(1.012, 0.01)], [True]))  # two scans, one cell
+    ev.add(rays((0.01, 0.01), [(1.018, 0.02)], [True]))
+    occ, pts = ev.hit_centroids((0, ev.shape[0], 0, ev.shape[1]))
+    assert occ.sum() == 1
+    assert np.allclose(pts[0], (1.015, 0.015), atol=1e-5)
+    ev.add(rays((0.01, 0.01), [(1.012, 0.01)], [True]), -1)  # counted out again
+    _, pts = ev.hit_centroids((0, ev.shape[0], 0, ev.shape[1]))
+    assert np.allclose(pts[0], (1.018, 0.02), atol=1e-5)
+
+
+@pytest.mark.parametrize("offset", [(0.08, -0.05, 0.03), (-0.1, 0.06, -0.04)])
+def test_a_scan_placed_off_is_brought_back_onto_the_walls_it_saw_before(offset):
+    """The room [0, 6] x [0, 4] seen from two poses; a third scan placed 8-12 cm and 2
+    degrees off is moved back to where it was taken, to a centimetre."""
+    from polyswarm.slam import gridmatch
+
+    grid = KeyframeRays(EvidenceGrid(0.05))
+    for i, pose in enumerate([(2.0, 2.0, 0.0), (4.0, 1.5, 0.5)]):
+        grid.add(i, pose, np.zeros(3), _room_points(pose))
+    truth = np.array([3.0, 2.5, 0.2])
+    pts = _room_points(truth).xy
+    out = gridmatch.refine(grid.grid, pts, truth + offset, radius_m=8.0)
+    assert out is not None
+    pose, share, before = out
+    assert np.hypot(*(pose[:2] - truth[:2])) < 0.01
+    assert abs(pose[2] - truth[2]) < math.radians(0.3)
+    assert share > 0.95 > before
+
+
+def test_returns_far_from_every_wall_leave_nothing_to_refine():
+    from polyswarm.slam import gridmatch
+
+    grid = KeyframeRays(EvidenceGrid(0.05))
+    grid.add(0, (2.0, 2.0, 0.0), np.zeros(3), _room_points((2.0, 2.0, 0.0)))
+    far = np.random.default_rng(0).uniform(20, 30, (50, 2))  # another building
+    assert gridmatch.refine(grid.grid, far, np.zeros(3), radius_m=5.0) is None

@@ -257,3 +257,22 @@ def test_priors_for_a_robot_whose_map_moved_during_the_solve_wait_for_the_next()
     finally:
         joint.close()
     assert [rid for rid, _ in out] == ["r2"]
+
+
+def test_a_fix_the_walls_do_not_choose_over_no_fix_is_rivalled():
+    """A corridor 1.1 m apart doors on both sides: a fix of one door spacing fits as well
+    as none, so it is no edge; a fix that ICP from no fix finds again is."""
+    from polyswarm.frames.jointgraph import _rivalled
+    from polyswarm.frames.mapmatch import align_walls, wall_points, wall_tree
+
+    starts, ends = [], []
+    for k in range(10):  # wall pieces 0.8 m long with 0.3 m door gaps, both sides
+        x = k * 1.1
+        starts += [(x, 0.0), (x + 0.8, 2.0)]
+        ends += [(x + 0.8, 0.0), (x, 2.0)]
+    corridor = wall_points(np.array(starts), np.array(ends))
+    local = wall_points(np.array(starts[4:12]), np.array(ends[4:12]))
+    tree = wall_tree(corridor)
+    assert _rivalled(corridor, local, tree, np.array([1.1, 0.0, 0.0]), len(local.walls))
+    here = align_walls(corridor, local, np.zeros(3), tree)
+    assert not _rivalled(corridor, local, tree, here, len(local.walls))

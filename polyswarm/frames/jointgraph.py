@@ -73,6 +73,12 @@ SEED_WINDOW_M = 1.0
 SEED_WINDOW_RAD = math.radians(8.0)
 MAX_FIX_M = 1.5  # a fix farther than this is another place, not a refinement
 MAX_FIX_RAD = math.radians(10.0)
+# ICP from where the maps already put the view settles elsewhere with this share of the
+# fix's agreeing points or more: the walls do not choose (a corridor with a few doors;
+# TurtleBot3s at the office's start were slid 1.1 m along it by such edges)
+RIVAL_SHARE = 0.9
+RIVAL_M = 0.2  # ... farther than this from the fix, or turned RIVAL_RAD from it
+RIVAL_RAD = math.radians(2.0)
 # an edge as a measure of where one robot's map lies against another's: the ICP's
 # agreement, and a turn's error carried out over the keyframes' spread
 RIGID_SIGMA_M = 0.10
@@ -223,6 +229,8 @@ def match_keyframe(
     inliers, share, condition = _agreement(tree, local, fix)
     if inliers < MIN_INLIERS or share < MIN_INLIER_SHARE or condition < MIN_CONDITION:
         return None
+    if _rivalled(target, local, tree, fix, inliers):
+        return None
     a_kid = int(near[np.argmin(d[d <= LOCAL_RADIUS_M + TARGET_MARGIN_M])])
     b_now = pose_of(mine[kid].frame)
     z = relative(pose_of(theirs[a_kid].frame), compose(fix, b_now))
@@ -245,6 +253,14 @@ def _seed(target: Walls, local: Walls, centre: np.ndarray) -> np.ndarray | None:
     if ambiguous:
         return None
     return compose(guess, (-centre[0], -centre[1], 0.0))
+
+
+def _rivalled(target: Walls, local: Walls, tree, fix: np.ndarray, inliers: int) -> bool:
+    """Whether ICP from no fix at all (the view where the maps hold it) settles on
+    another fix that the walls agree with nearly as well (``RIVAL_SHARE``)."""
+    here = align_walls(target, local, np.zeros(3), tree)
+    apart = math.hypot(*(here[:2] - fix[:2])) > RIVAL_M or abs(wrap(here[2] - fix[2])) > RIVAL_RAD
+    return apart and _agreement(tree, local, here)[0] >= RIVAL_SHARE * inliers
 
 
 def _agreement(tree, local: Walls, fix: np.ndarray) -> tuple[int, float, float]:

@@ -94,6 +94,9 @@ class EvidenceGrid:
         # grew another way counts the same rays in the same cells
         self.first = np.zeros(2, dtype=np.int64)
         self.counts = np.zeros((3, 0, 0), dtype=np.int16)  # hits, misses, weak misses
+        # where in its cell each scan's return fell, summed over the cell's hits (metres
+        # from the cell's corner, x and y): the walls' positions finer than a cell
+        self.hit_xy = np.zeros((2, 0, 0), dtype=np.float32)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -110,8 +113,10 @@ class EvidenceGrid:
         rows, cols = self.shape
         size = rows * cols
         kinds = [[], [], []]  # per kind: scan * size + cell, for every scan
+        spots = []  # per scan: (its hit cells, where in them its returns fell on average)
         for k, r in enumerate(scans):
-            hit = self._flat(r.ends[r.hit])
+            hit, spot = self._hit_spots(r.ends[r.hit])
+            spots.append((hit, spot))
             passed = self._passed(r.origins[r.hit], r.ends[r.hit])
             weak = self._passed(r.origins[~r.hit], r.ends[~r.hit], to_end=True)
             passed = np.setdiff1d(passed, hit, assume_unique=True)
@@ -123,16 +128,63 @@ class EvidenceGrid:
             touched, n = np.unique(np.concatenate(keyed) % size, return_counts=True)
             v = flat[k, touched].astype(np.int32) + sign * n
             flat[k, touched] = np.clip(v, 0, COUNT_MAX).astype(np.int16)
+        at = self.hit_xy.reshape(2, size)
+        for cells, spot in spots:
+            np.add.at(at[0], cells, sign * spot[:, 0])
+            np.add.at(at[1], cells, sign * spot[:, 1])
+        empty = flat[0] == 0
+        at[:, empty] = 0.0  # no hit left: no position (counts out may leave rounding)
 
-    def log_odds(self) -> np.ndarray:
-        h, m, w = (c.astype(np.float32) for c in self.counts)
+    def _hit_spots(self, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The cells the returns ``ends`` fell in (flat, each once) and, per cell, where
+        in it they fell on average (metres from its corner)."""
+        rows, cols = self.shape
+        cx = np.floor(ends[:, 0] / self.res).astype(np.int64)
+        cy = np.floor(ends[:, 1] / self.res).astype(np.int64)
+        c, r = cx - self.first[0], cy - self.first[1]
+        ok = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
+        flat = r[ok] * cols + c[ok]
+        off = ends[ok] - np.stack([cx[ok], cy[ok]], axis=1) * self.res
+        cells, inv = np.unique(flat, return_inverse=True)
+        n = np.bincount(inv, minlength=len(cells))
+        spot = (
+            np.stack(
+                [np.bincount(inv, off[:, 0], len(cells)), np.bincount(inv, off[:, 1], len(cells))],
+                axis=1,
+            )
+            / np.maximum(n, 1)[:, None]
+        )
+        return cells, spot
+
+    def hit_centroids(self, window: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """The occupied cells of ``window`` (mask) and where their returns fell on average
+        (world metres, (k, 2) in the mask's row-major order)."""
+        i0, i1, j0, j1 = window
+        _, occ = self.masks(window)
+        h = self.counts[0, i0:i1, j0:j1].astype(np.float32)
+        r, c = np.nonzero(occ)
+        fj, fi = (int(v) for v in self.first)
+        xy = self.hit_xy[:, i0:i1, j0:j1][:, r, c] / np.maximum(h[r, c], 1.0)
+        corner = np.stack([(fj + j0 + c) * self.res, (fi + i0 + r) * self.res])
+        return occ, (corner + xy).T
+
+    def log_odds(self, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+        """Each cell's log-odds (of the array rows i0:i1, columns j0:j1 of ``window``)."""
+        sub = self.counts if window is None else self._sub(window)
+        h, m, w = (c.astype(np.float32) for c in sub)
         return HIT * h + MISS * m + WEAK_MISS * w
 
-    def masks(self) -> tuple[np.ndarray, np.ndarray]:
-        """(free, occupied) cells; unknown cells are in neither."""
-        L = self.log_odds()
-        seen = self.counts.any(axis=0)
+    def masks(
+        self, window: tuple[int, int, int, int] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(free, occupied) cells (of ``window``); unknown cells are in neither."""
+        L = self.log_odds(window)
+        seen = (self.counts if window is None else self._sub(window)).any(axis=0)
         return seen & (L < 0), seen & (L > 0)
+
+    def _sub(self, window: tuple[int, int, int, int]) -> np.ndarray:
+        i0, i1, j0, j1 = window
+        return self.counts[:, i0:i1, j0:j1]
 
     def view(
         self, origin, bearings: np.ndarray, max_range_m: float
@@ -169,11 +221,8 @@ class EvidenceGrid:
         j0 = max(math.floor((origin[0] - radius_m) / self.res) - fj, 0)
         i1 = min(math.ceil((origin[1] + radius_m) / self.res) + 1 - fi, rows)
         j1 = min(math.ceil((origin[0] + radius_m) / self.res) + 1 - fj, cols)
-        sub = self.counts[:, i0:i1, j0:j1]
-        h, m, w = (x.astype(np.float32) for x in sub)
-        L = HIT * h + MISS * m + WEAK_MISS * w
-        seen = sub.any(axis=0)
-        free, occ = seen & (L < 0), seen & (L > 0)
+        free, occ = self.masks((i0, i1, j0, j1))
+        seen = self._sub((i0, i1, j0, j1)).any(axis=0)
         gaps = ~seen & ndimage.binary_closing(free, np.ones((3, 3), dtype=bool))
         near = ndimage.binary_dilation(occ, iterations=NEAR_OBSTACLE_CELLS)
         x0 = (fj + j0) * self.res
@@ -221,10 +270,12 @@ class EvidenceGrid:
         if new_rows * new_cols > MAX_CELLS:
             raise MapError(f"an evidence grid of {new_rows} x {new_cols} cells is refused")
         grown = np.zeros((3, new_rows, new_cols), dtype=np.int16)
+        spots = np.zeros((2, new_rows, new_cols), dtype=np.float32)
         if rows:
             dj, di = (int(v) for v in self.first - new_first)
             grown[:, di : di + rows, dj : dj + cols] = self.counts
-        self.counts, self.first = grown, new_first
+            spots[:, di : di + rows, dj : dj + cols] = self.hit_xy
+        self.counts, self.hit_xy, self.first = grown, spots, new_first
 
 
 class KeyframeRays:

@@ -45,6 +45,7 @@ from polyswarm.polymap import (
     snap_polygon,
 )
 from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
+from polyswarm.slam import gridmatch
 from polyswarm.slam.evidence import EvidenceGrid, KeyframeRays, view_points
 from polyswarm.slam.follow import Atlas, CorrectionOp, correct, pose_of
 from polyswarm.slam.icp import IcpResult, PointToVectorIcp
@@ -128,6 +129,11 @@ POOR_FIT_SHARE = 0.3  # ICP matched fewer than this share of the scan's points
 RESEED_WINDOW_M = 0.5  # the search window around the prediction: +-0.5 m ...
 RESEED_WINDOW_RAD = math.radians(30.0)  # ... and +-30 degrees, in 5 cm and 1 degree steps
 RESEED_GAIN = 1.25  # the second fit is kept if it matches this many times the points
+# the pose refined on the evidence's walls is kept unless fewer of the returns end on a
+# wall (within 0.1 m) there than at ICP's pose. Pose error p95 over TurtleBot3/4, Hokuyo
+# and Neato on office, furnished and nav2-depot (2 seeds): median 0.94 m without the
+# refinement, 0.525 m keeping it always, 0.505 m with this rule
+GRID_MARGIN = 0.0
 
 
 class PolySlam:
@@ -145,6 +151,7 @@ class PolySlam:
         (``polyswarm.config.OutOfRange``)."""
         self.cfg = cfg
         self.reseeded = 0  # keyframes whose ICP was seeded again by a correlative search
+        self.grid_refined = 0  # keyframes whose ICP pose was refined on the evidence
         self.out_of_range = out_of_range
         self.map = GridPolyMap(cell_size_m)
         self.pose = np.array(initial_pose, dtype=float)
@@ -351,6 +358,8 @@ class PolySlam:
         valid = points.xy[aligned]
         if len(valid) and (self.store or self.map.cells):
             res = self._align(valid, pred, points.origin)
+            if self.evidence is not None and res.inliers > 0:
+                res = self._refine_on_evidence(res, valid, scan.range_max)
             pose = res.pose if res.inliers > 0 else pred
             self.degenerate_keyframes += res.degenerate_axis is not None
         pinned = self._learn_scale(res, odom, len(valid))
@@ -483,14 +492,34 @@ class PolySlam:
         s, e = self._reference(pred)
         res = self.icp.align(valid, pred, s, e, origin)
         if res.inliers < POOR_FIT_SHARE * len(valid) and len(s):
-            guess, _, _ = correlative_search(
+            guess, _, ambiguous = correlative_search(
                 valid, pred, s, e, RESEED_WINDOW_M, 0.05, RESEED_WINDOW_RAD, math.radians(1.0)
             )
+            if ambiguous:  # another pose fits nearly as well (a corridor): the prediction
+                return res
             again = self.icp.align(valid, guess, s, e, origin)
             if again.inliers > RESEED_GAIN * res.inliers:
                 self.reseeded += 1
                 return again
         return res
+
+    def _refine_on_evidence(self, res: IcpResult, valid: np.ndarray, range_m: float) -> IcpResult:
+        """ICP's pose refined against every wall of the evidence (``slam.gridmatch``), kept
+        when clearly more of the returns end on a wall there: ICP against few keyframes
+        with few points can settle beside the walls; where it fits well the grid's 5 cm
+        cells are less precise than its vectors, so it is kept. In a corridor (a
+        degenerate axis) the position along it stays ICP's."""
+        out = gridmatch.refine(self.evidence.grid, valid, res.pose, range_m)
+        if out is None:
+            return res
+        pose, share, before = out
+        if share < before + GRID_MARGIN:
+            return res
+        if res.degenerate_axis is not None:
+            along = res.degenerate_axis @ (pose[:2] - res.pose[:2])
+            pose = np.r_[pose[:2] - along * res.degenerate_axis, pose[2]]
+        self.grid_refined += 1
+        return replace(res, pose=pose)
 
     def _reference(self, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.store and self.cfg.submap.reference == IcpReference.KEYFRAMES:
