@@ -107,8 +107,8 @@ AUDIT_PERIOD_S = 10.0  # simulated seconds between audits of one merged robot's 
 UNDO_CONTRADICTIONS = 2 * MIN_CONTRADICTIONS
 # of the walls a merged robot's map shares with the maps merged before it, the share in
 # their clear space that undoes the merge, in UNDO_AUDITS audits in a row: right frames
-# conflict 0.1-0.2 % on the thesis sensor and 1-8 % on the TurtleBot3 (doubled walls,
-# docs/merge-log.md); a frame 2.2 m and 20 deg off, 62-69 % (office launch, seed 1)
+# conflict 0.1-0.2 % on the thesis sensor and 1-8 % on the TurtleBot3 (doubled
+# walls); a frame 2.2 m and 20 deg off, 62-69 % (office launch, seed 1)
 UNDO_CONFLICT_SHARE = 0.25
 UNDO_AUDITS = 2
 UNDO_EVIDENCE_LOGGED = 10  # contradicting moments logged with an undo

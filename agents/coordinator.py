@@ -123,7 +123,7 @@ RETRY_GROWTH_M2 = 2.0
 # at 98 % drove back to wall frontiers that two looks had left open (a wall placed off
 # by the pose error), and 99 % came only on the way home (3.2 and 3.3 times the
 # reference). Measured since: it decided differently in 2 of 20 such runs, and no effect
-# beyond run-to-run spread is shown (docs/exploration-log.md, 2026-11-28)
+# beyond run-to-run spread is shown
 LOOK_RETRY_MARGIN_M = LOOK_MOVED_M + 1.0
 # at the end of a run, the replay pool's last updates are waited for this long (s): with
 # 25 robots on one replay process its results ran 1.7 s behind (p95, bench cycle)

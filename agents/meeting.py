@@ -7,7 +7,7 @@ A frame is committed only where the robots saw each other in three distinct plac
 waiting robot is drawn towards the other robot along its frontiers; in the rooms world
 (a 30 m lidar explores the flat from the doorways in seconds) the frontiers ran out at
 once, the robots stood where they were, saw each other in one or two places and 5 of 10
-waiting robots were never merged (``docs/merge-log.md``; touring did not change that
+waiting robots were never merged (touring did not change that
 count in 5 launches; standpoints where a sighting can count merged 7 and then 3 of 10
 in two runs of the same code: kept because it adds places to be seen in without a cost
 measured). Each standpoint is at least

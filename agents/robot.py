@@ -219,6 +219,17 @@ class RobotAgent:
         self.behaviour.on_assignment(a, now_s, self.pose)
 
     @property
+    def planning_map(self) -> GridPolyMap:
+        """The map the robot plans on: the merged map once the coordinator shares one."""
+        return self.merged if self.merged is not None else self.slam.map
+
+    @property
+    def target_xy(self) -> tuple[float, float] | None:
+        """Where the robot is sent (an exploration or return goal), or None."""
+        a = self.assignment
+        return None if a is None or a.target < 0 else a.goal
+
+    @property
     def in_shared_frame(self) -> bool:
         return (self.frame_known or self.frame > 0) and not self.own_frame
 
@@ -579,12 +590,18 @@ def run_agent(
         bus = Bus(session, robot_id)
         try:
             frames = RosFrames()
-            node = None
+            node = ros_node = None
             if cfg.agent.source == SensorSource.RMW_ZENOH:
                 node = RmwZenohNode(bus, cfg.agent, robot_id)
                 node.declare()
-            sensors = subscribe_sensors(bus, me, cfg.agent, frames)
-            sink = CommandSink(bus, me, cfg.agent, node)
+            if cfg.agent.source == SensorSource.ROS2_NODE:
+                from agents.ros2_node import Ros2Node
+
+                ros_node = Ros2Node(bus, cfg.agent, robot_id, frames)
+                sensors = [ros_node.scan_topic, ros_node.odom_topic]
+            else:
+                sensors = subscribe_sensors(bus, me, cfg.agent, frames)
+            sink = CommandSink(bus, me, cfg.agent, node, ros_node)
             bus.subscribe(keys.all_robots("pose"), Pose)
             bus.subscribe(keys.assignment(robot_id), Assignment)
             bus.subscribe(keys.anchor(robot_id), Anchor)
@@ -663,6 +680,8 @@ def run_agent(
                         log.warning("%s: %s", robot_id, e)
                 while waiting and time.monotonic() - waiting[0][0] > SCAN_WAIT_S:
                     _process_scan(bus, me, agent, waiting.pop(0)[1], sink, state_dir)
+                if ros_node is not None:
+                    ros_node.publish_map(agent.planning_map, agent.target_xy)
                 if need_merged and agent.in_shared_frame:
                     got = bus.fetch_map(keys.merged_map, timeout_s=2.0)
                     if got is not None:
@@ -674,6 +693,8 @@ def run_agent(
         finally:
             if attach is not None and detach is not None:
                 detach()
+            if ros_node is not None:
+                ros_node.close()
             agent.stats.refused += bus.rejected  # refused by the decoders on arrival
             bus.close()
             st = agent.stats

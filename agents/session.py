@@ -181,6 +181,7 @@ class Bus:
         self.session = session
         self.sender = sender
         self._queue: queue.Queue[Received] = queue.Queue(QUEUE_LIMIT)
+        self._injected = iter(range(1 << 62))  # sequence numbers of injected messages
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._seq: dict[str, int] = {}
         self._streams = 0
@@ -362,6 +363,10 @@ class Bus:
                 log.exception("handling a message on %s failed", k)
 
         self._handles.append(self.session.declare_subscriber(key, on_sample))
+
+    def inject(self, key: str, stamp_s: float, msg: Message) -> None:
+        """Queue a message that arrived by another way than Zenoh (a ROS 2 node's)."""
+        self._put(Received(key, "ros2-node", next(self._injected), stamp_s, msg))
 
     def put_raw(
         self, key: str, data: bytes, reliable: bool = False, attachment: bytes | None = None

@@ -148,12 +148,17 @@ class RmwZenohNode:
 class CommandSink:
     """Sends the agent's velocity commands (or goals) in the configured form."""
 
-    def __init__(self, bus, me: RobotKeys, io: AgentIoConfig, node: RmwZenohNode | None = None):
+    def __init__(
+        self, bus, me: RobotKeys, io: AgentIoConfig, node: RmwZenohNode | None = None, ros2=None
+    ):
         self.bus, self.me, self.io, self.node = bus, me, io, node
+        self.ros2 = ros2  # agents.ros2_node.Ros2Node: commands go into the robot's graph
         self._goal_target: int | None = None
 
     def _put(self, template: str, ros_type: str, cdr: bytes, reliable: bool = False) -> None:
-        if self.node is not None:
+        if self.ros2 is not None:
+            self.ros2.put_cdr(template, ros_type, cdr, reliable)
+        elif self.node is not None:
             self.node.put(self.node.publisher(template, ros_type), cdr, reliable)
         else:
             self.bus.put_raw(self.io.key(template), cdr, reliable=reliable)

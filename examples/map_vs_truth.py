@@ -1,6 +1,6 @@
-"""A map against its world's ground truth: what the IoU leaves out.
+"""A PolyMap against its world's ground truth: what the IoU leaves out.
 
-    python examples/map_vs_truth.py runs/bench-tb4/turtlebot4-office-3-hungarian-0 office
+    python examples/map_vs_truth.py runs/<launch>/map.polymap office
 
 Explored space outside the true free space (mostly inside walls), true free space not
 mapped, and the IoU of the two.
@@ -15,9 +15,9 @@ import shapely
 from protocols.files import read_polymap
 from sim.world import load_world
 
-if __name__ == "__main__":
-    run, world = sys.argv[1], sys.argv[2]
-    free = read_polymap(f"{run}/map.polymap").explored_region()
+
+def main(polymap: str, world: str) -> None:
+    free = read_polymap(polymap).explored_region()
     truth = load_world(world).free
     outside = shapely.area(shapely.difference(free, truth))
     missed = shapely.area(shapely.difference(truth, free))
@@ -27,3 +27,7 @@ if __name__ == "__main__":
         f"{outside:.1f} m2, true free space not mapped {missed:.1f} m2 "
         f"(of {shapely.area(truth):.1f} m2)"
     )
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])

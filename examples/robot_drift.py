@@ -6,8 +6,7 @@ Reads ``trajectories/rK.tum`` (the robot's SLAM estimate, in the shared frame it
 start pose defines) and ``rK_truth.tum`` (the simulator's ground truth), matches each
 estimate to the first true pose at or after its time, and prints per robot the largest
 and final position error and the error along the run (no alignment: the start pose is
-known). This located the zigzag jumps in the README (2.45 and 4.22 m in the first lane
-before other robots' returns were kept from SLAM, at most 0.23 m after).
+known).
 """
 
 from __future__ import annotations

@@ -322,7 +322,7 @@ class SlamConfig:
     # the odometry's distance scale (a wheel radius off) is learnt from keyframes ICP
     # pinned down and corrected where ICP keeps the odometry (polyswarm.slam.odomscale). Off:
     # with the TurtleBot3's 3.5 m lidar the learnt scale was up to 1.8 % wrong and 3-robot
-    # office runs gained nothing measurable (docs/slam-log.md); on in the
+    # office runs gained nothing measurable; on in the
     # thesis-noisy-odometry profile, where the 30 m lidar makes it right to 0.5 %
     learn_odometry_scale: bool = False
     obstacle_max_gap_m: float = positive(0.5, 100.0)  # points farther apart: a frontier...
@@ -433,6 +433,7 @@ class SensorSource(StrEnum):
     NATIVE = "native"  # polyswarm Scan and Odometry messages (the simulator, log replay)
     ROS2 = "ros2"  # sensor_msgs/LaserScan and nav_msgs/Odometry CDR (zenoh-bridge-ros2dds)
     RMW_ZENOH = "rmw_zenoh"  # the same, from a robot whose ROS 2 runs on rmw_zenoh (no bridge)
+    ROS2_NODE = "ros2-node"  # a node of the robot's ROS 2 graph (rclpy): map and markers out
 
 
 class CommandOutput(StrEnum):

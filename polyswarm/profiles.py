@@ -308,7 +308,7 @@ THESIS_NOISY_ODOMETRY = Profile(
     odometry_noise=dict(TURTLEBOT3.odometry_noise),
     # the wheel scale learnt (polyswarm.slam.odomscale): single-robot loop explorations with
     # this odometry, seeds 0-4, reached 99 % in 2 of 5 runs without, 4 of 5 with (8 of 10
-    # over seeds 0-9; docs/exploration-log.md)
+    # over seeds 0-9)
     slam={**THESIS.slam, "learn_odometry_scale": True},
 )
 

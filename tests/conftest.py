@@ -54,3 +54,28 @@ def room_scan(t: float = 0.0):
     angles = np.linspace(-2.35, 2.35, 361)
     r = cast_rays((0.0, 0.0), angles, corners, np.roll(corners, -1, axis=0), 30.0)
     return LaserScan(r.astype(np.float32), -2.35, angles[1] - angles[0], 0.1, 30.0, t)
+
+
+# whole missions, benchmarks and real browsers: the full tier (`make test`, CI) runs
+# them, the fast tier (`make check`) leaves them out
+WHOLE_RUNS = {
+    "test_launch_e2e",
+    "test_faults",
+    "test_unknown_start",
+    "test_view",
+    "test_examples",
+    "test_fuzz",
+    "test_bandwidth",
+    "test_odomscale",
+    "test_bench_cycle",
+    "test_bench_explore",
+    "test_bench_load",
+    "test_bench_memory",
+    "test_bench_merge",
+}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.stem in WHOLE_RUNS:
+            item.add_marker(pytest.mark.slow)

@@ -83,6 +83,24 @@ def test_known_errors_are_one_line_and_exit_1(tmp_path):
     assert p.returncode == 1
 
 
+def test_files_and_values_a_user_gets_wrong_end_in_one_line(small_world, tmp_path):
+    pm = tmp_path / "m.polymap"
+    run("map", "convert", str(small_world), "-o", str(pm), "--cell-size", "1.0")
+    for args in (
+        ("map", "export", str(pm), "-o", str(tmp_path / "missing" / "dir" / "x.yaml")),
+        ("slam", "--world", "rooms", "-o", str(pm)),  # a file where a folder goes
+        ("fleet-config", "--robots", "r1,r1", "--out", str(tmp_path / "fleet")),
+    ):
+        p = run(*args, check=False)
+        assert p.returncode == 1, args
+        last = p.stderr.strip().splitlines()[-1]  # (pybullet prints its build time first)
+        assert last.startswith("error:") and "Traceback" not in p.stderr, args
+    p = run(
+        "map", "export", str(pm), "-o", str(tmp_path / "x.yaml"), "--resolution", "0", check=False
+    )
+    assert p.returncode == 2 and "--resolution" in p.stderr and "Traceback" not in p.stderr
+
+
 def test_log_lines_go_to_standard_error():
     # `bench ... --json` prints its JSON on standard output; a warning logged during the
     # run (the 10-robot load test logs some) must not land in it

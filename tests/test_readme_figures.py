@@ -1,6 +1,6 @@
-"""Every headline figure in the README comes from a committed result file.
+"""Every figure in the README and docs/results.md comes from a committed result file.
 
-A row of the README's headline table ends in a cell like
+A row of their tables ends in a cell like
 ```bandwidth.json#runs.{aces-corrected,csail-corrected}.delta_bytes_ratio_vs_keyframe_scans```
 (braces expand to one key each; a ``*100`` suffix scales the values, for percentages);
 its value cell lists the figures in the same order, as printed (``never`` for a missing
@@ -17,7 +17,8 @@ import pytest
 
 from polyswarm.benchmarks.results import RESULTS_DIR, load, lookup
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = (ROOT / "README.md", ROOT / "docs" / "results.md")
 REF = re.compile(r"`([\w.-]+)\.json#([^`]+)`")
 NUMBER = re.compile(r"never|-?\d[\d,]*(?:\.\d+)?")
 
@@ -38,7 +39,7 @@ def expand(key: str) -> list[str]:
 def headline_rows() -> list[tuple[str, str, str, str]]:
     """(row text, value cell, file name, key) of every table row naming a result."""
     rows = []
-    for line in README.read_text().splitlines():
+    for line in (line for page in PAGES for line in page.read_text().splitlines()):
         if not line.startswith("|"):
             continue
         cells = [c.strip() for c in line.strip("|").split("|")]
@@ -48,10 +49,16 @@ def headline_rows() -> list[tuple[str, str, str, str]]:
     return rows
 
 
-def test_the_readme_has_a_headline_table_of_committed_results():
+def test_the_pages_cite_committed_results_and_every_result_is_cited():
     rows = headline_rows()
     assert len(rows) >= 8
-    assert {name for _, _, name, _ in rows} <= {p.stem for p in RESULTS_DIR.glob("*.json")}
+    cited = {name for _, _, name, _ in rows}
+    assert cited == {p.stem for p in RESULTS_DIR.glob("*.json")}
+
+
+def test_no_result_was_measured_on_uncommitted_code():
+    for path in RESULTS_DIR.glob("*.json"):
+        assert not load(path.stem)["meta"]["code_version"].endswith("-dirty"), path.name
 
 
 @pytest.mark.parametrize("row", headline_rows(), ids=lambda r: r[0][:40])

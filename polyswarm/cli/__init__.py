@@ -119,6 +119,11 @@ def main(argv: list[str] | None = None) -> None:
         logging.getLogger("polyswarm").debug("error", exc_info=True)
         typer.secho(f"error: {e}", fg=typer.colors.RED, err=True)
         sys.exit(1)
+    except OSError as e:  # a file or folder that is missing, exists, or is not allowed
+        logging.getLogger("polyswarm").debug("error", exc_info=True)
+        where = f": {e.filename}" if e.filename else ""
+        typer.secho(f"error: {e.strerror or e}{where}", fg=typer.colors.RED, err=True)
+        sys.exit(1)
     except KeyboardInterrupt:
         typer.secho("interrupted", err=True)
         sys.exit(130)

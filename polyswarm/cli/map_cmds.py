@@ -80,9 +80,11 @@ def export(
     out: Path = typer.Option(..., "-o", "--out", help="Output: .svg, .png, .geojson or .yaml"),
     grid: bool = typer.Option(False, "--grid", help="Draw the cell grid (svg, png)."),
     sectors: bool = typer.Option(False, "--sectors", help="Draw sector vectors (svg, png)."),
-    resolution: float = typer.Option(0.05, help="Grid resolution for .yaml, metres."),
+    resolution: float = typer.Option(
+        0.05, min=0.001, help="Grid resolution for .yaml, metres per cell."
+    ),
     wall_thickness: float = typer.Option(
-        0.1, help="Wall thickness assumed behind obstacle vectors for .yaml, metres."
+        0.1, min=0.0, help="Wall thickness assumed behind obstacle vectors for .yaml, metres."
     ),
 ) -> None:
     """Export a map; the format follows the suffix of --out."""

@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from polyswarm.cli import PROFILE_HELP, app, exit_now, load_cfg
-from polyswarm.errors import ConfigError
+from polyswarm.errors import ConfigError, SimulationError
 
 CONFIG_OPT = typer.Option(None, "--config", "-c", help="TOML config file.")
 ENDPOINT_HELP = "Zenoh endpoint of the router (default: comms.endpoint of the config)."
@@ -422,6 +422,8 @@ def launch_cmd(
         table.add_row("frames never found", ", ".join(m["unanchored"]))
     Console().print(table)
     typer.echo(f"wrote {res.out}", err=True)
+    if m["crashed_processes"]:  # a process that died for good fails the launch
+        raise SimulationError(f"process(es) died for good: {', '.join(m['crashed_processes'])}")
 
 
 @app.command("fleet-config")
@@ -440,6 +442,8 @@ def fleet_config_cmd(
     from agents.fleet import client_config, router_config
 
     ids = [r for r in robots.split(",") if r]
+    if not ids or len(set(ids)) != len(ids):
+        raise ConfigError(f"--robots {robots!r}: give distinct robot ids, comma separated")
     tls = {
         "root_ca_certificate": f"{certs}/ca.pem",
         "listen_certificate": f"{certs}/router.pem",

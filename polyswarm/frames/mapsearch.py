@@ -24,7 +24,7 @@ So the search runs coarse to fine:
 On recorded explorations (``bench merge``'s robot maps, 3 robots, every third 5 s
 moment; office, rooms and the procedural loop, cross and maze, one seed each, and the
 thesis's 80 m loop; one process, the two searches one after the other on each pair,
-``docs/results/map-search.json``), ``match_maps`` gave the verdict of the one-pass fine
+measured side by side), ``match_maps`` gave the verdict of the one-pass fine
 search in 67 of 68 pairs and the same pose in 57 of the 59 it accepted or proposed (the
 three differences on the 80 m loop, whose corridors fit many poses; there, scored
 against the true frames, ``map-search-thesis-loop.json``, both searches proposed only

@@ -87,7 +87,7 @@ SEEN_APART_M = 1.5
 # kept it out and delayed six right frames in corridors by 1-38 matches
 # (launch-sightings.json); the arc keeps it out at any range. On bench merge's recorded
 # pairs (merge-sight-arc.json) right poses seen in 3 places: 14 of 53 as with the cap;
-# wrong poses seen at all: 0 of 141 (the margin tried at 0.15-0.25 m: docs/merge-log.md)
+# wrong poses seen at all: 0 of 141 (a margin of 0.15-0.25 m was tried instead)
 ARC_CLEAR_M = 0.25
 ARC_STEP_M = 0.1  # the arc is tested at points this far apart
 ROOM_RES_M = 0.1  # the raster of where a robot can stand

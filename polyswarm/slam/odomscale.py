@@ -17,7 +17,7 @@ residuals): s = (sum(icp . odo) + lam) / (sum(odo . odo) + lam), lam = sigma^2 /
 Old pairs are forgotten over ``MEMORY_M`` of travel. With ``slam.learn_odometry_scale``
 PolySLAM multiplies the odometry's distances by it when predicting a pose. It is off by
 default: with the TurtleBot3's 3.5 m lidar the estimate was up to 1.8 % wrong and
-3-robot explorations gained nothing measurable (``docs/slam-log.md``); the
+3-robot explorations gained nothing measurable; the
 ``thesis-noisy-odometry`` profile turns it on.
 
     scale = OdometryScale()
