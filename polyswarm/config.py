@@ -386,7 +386,7 @@ class ExploreConfig:
     # a robot stood at the goal, within sensor range, and looked, yet the frontier stayed
     # open where it was: after this many such looks it is a frontier that looking does not
     # close (mostly wall faces seen at a grazing angle). A look that moves the frontier on
-    # is not one of them (agents.coordinator.LOOK_MOVED_M)
+    # is not one of them (agents.allocation.LOOK_MOVED_M)
     blacklist_after_looks: int = num(2, 1, 1000)
     no_progress_timeout_s: float = positive(20.0, 1e5)  # path cost must shrink within this
     hysteresis: float = num(0.8, 0.0, 1.0, lo_open=True)  # a new target must cost less than

@@ -75,7 +75,18 @@ WHOLE_RUNS = {
 }
 
 
+# single tests over 10 s (pytest --durations): a whole recording or a long route each
+LONG_TESTS = {
+    "test_slam_following_the_graph_sends_corrections_a_receiver_and_the_coordinator_follow",
+    "test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node",
+    "test_an_anchored_slam_moves_its_map_as_one_correction_a_receiver_follows",
+    "test_the_shared_turtlebot3_bag_maps_sharper_than_its_odometry",
+    "test_slam_on_a_bag_uses_the_mount_from_tf_and_is_sharper_than_odometry",
+    "test_replayed_log_builds_the_map_of_offline_slam",
+}
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if item.path.stem in WHOLE_RUNS:
+        if item.path.stem in WHOLE_RUNS or item.originalname in LONG_TESTS:
             item.add_marker(pytest.mark.slow)

@@ -7,13 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from agents.coordinator import (
-    END_CONFIRM_CYCLES,
-    EXCLUDE_S,
-    FOLLOW_AFTER_S,
-    REACHED_GRACE_S,
-    Coordinator,
-)
+from agents.allocation import EXCLUDE_S, FOLLOW_AFTER_S, REACHED_GRACE_S
+from agents.coordinator import END_CONFIRM_CYCLES, Coordinator
 from polyswarm.config import Config
 from polyswarm.errors import DeltaGapError
 from polyswarm.explore.assign import Strategy, assign

@@ -225,7 +225,7 @@ def coordinator_cmd(
     ),
 ) -> None:
     """Run the coordinator (and the Zenoh router): merged map, frontiers, assignment."""
-    from agents.coordinator import run_coordinator
+    from agents.coordinator_process import run_coordinator
     from agents.session import SessionSpec
     from polyswarm.config import load_config, with_overrides
 

@@ -1,0 +1,279 @@
+"""The coordinator's process: a Zenoh session wired to ``agents.coordinator.Coordinator``.
+
+``run_coordinator`` subscribes the robots' updates and statuses, serves the merged map,
+runs the cycle, the joint pose graph and the frames' matching, and publishes what the
+cycle decides; the helpers below turn messages into calls of the coordinator."""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+import numpy as np
+
+from agents import persist
+from agents.coordinator import DRAIN_TIMEOUT_S, Coordinator
+from agents.merger import MergeProcess
+from agents.replay import ReplayPool
+from polyswarm.config import Config, known_starts
+from polyswarm.errors import DecodeError, MapError, PolyswarmError
+from polyswarm.polymap import MapDelta
+from protocols.keys import SwarmKeys
+from protocols.mapcodec import (
+    decode_any_map,
+    encode_delta,
+    encode_map,
+)
+from protocols.messages import (
+    MapChunk,
+    MapKind,
+    Pose,
+    RobotStatus,
+)
+
+log = logging.getLogger(__name__)
+
+
+def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = None) -> Coordinator:
+    """Run the coordinator until ``stop`` is set (or SIGINT/SIGTERM)."""
+    from agents.anchoring import Anchoring
+    from agents.joint import JointCorrections
+    from agents.session import Bus, is_alive_change, open_session, stop_on_signals
+
+    stop = stop or stop_on_signals()
+    keys = SwarmKeys(cfg.comms.swarm)
+    starts = known_starts(cfg.robots)
+    robots = {rid: tuple(st) for rid, st in starts.items() if st is not None}
+    coord = Coordinator(cfg, robots)
+    # robots whose start poses were not given explore alone until their frames are found
+    anchoring = Anchoring(cfg, [rid for rid, st in starts.items() if st is None])
+    joint = JointCorrections() if cfg.explore.joint_graph else None
+    state_dir = cfg.persist.dir
+    journal = persist.CoordinatorJournal(state_dir) if state_dir else None
+    if state_dir:
+        merged, robot_maps = persist.load_coordinator(state_dir)
+        coord.restore(merged, robot_maps)
+        if merged is not None:
+            log.info(
+                "restored the merged map (version %d, %.1f m2) and %d robot maps from %s",
+                merged.version,
+                merged.explored_area(),
+                len(robot_maps),
+                state_dir,
+            )
+    with open_session(session_spec) as session:
+        bus = Bus(session, "coordinator")
+        pool = merger = None
+        try:
+            if cfg.explore.replay_workers:
+                # the robots' map copies are journaled by the pool's processes
+                pool = coord.use_pool(ReplayPool(cfg.explore.replay_workers, state_dir))
+            if cfg.explore.merge_process:
+                merger = coord.use_merger(MergeProcess(coord.merged, cfg.nav))
+            bus.subscribe(keys.all_robots("map/delta"), MapChunk)
+            bus.subscribe(keys.all_robots("pose"), Pose)
+            bus.subscribe(keys.all_robots("status"), RobotStatus)
+            precision_m = cfg.map.whole_map_precision_m  # a whole map goes at 1 mm
+            bus.serve_map(
+                keys.merged_map,
+                lambda: (encode_map(coord.merged, precision_m), coord.merged.version),
+            )
+            bus.declare_alive(keys.alive("coordinator", "coordinator"))
+            bus.watch_alive(keys.all_alive("agent"))
+            resync: set[str] = set()
+            log.info("coordinator up: robots %s, strategy %s", list(robots), coord.strategy)
+            while not stop.is_set():
+                for item in bus.poll(timeout_s=0.05):
+                    alive = is_alive_change(item)
+                    try:
+                        if alive is not None:
+                            who = keys.alive_name(item.key)
+                            if who is not None:
+                                anchoring.owner(who[1], coord).on_alive(who[1], alive)
+                            continue
+                        rid = keys.robot_of(item.key)
+                        if rid is None:
+                            continue
+                        msg = item.msg
+                        if isinstance(msg, Pose):
+                            anchoring.sighted(rid, item.stamp_s, msg)
+                            if rid in anchoring.waiting:
+                                anchoring.on_pose(rid, msg.frame, msg.map_version, coord, msg.own)
+                        owner = anchoring.owner(rid, coord)
+                        if owner is not coord:  # exploring alone: its own coordinator
+                            _robot_message(owner, rid, item, resync)
+                            continue
+                        if isinstance(msg, Pose):
+                            coord.on_pose(rid, item.stamp_s, msg)
+                        elif isinstance(msg, RobotStatus):
+                            coord.on_status(rid, item.stamp_s, msg)
+                        elif isinstance(msg, MapChunk) and item.payload is not None:
+                            try:
+                                wire = item.payload
+                                changed = coord.on_robot_update(rid, item.stamp_s, msg.kind, wire)
+                            except MapError as e:
+                                _resync(coord, rid, e, resync)
+                            else:  # journaled as the cells it changed (restores need no merge)
+                                raw = wire if msg.kind == MapKind.DELTA else None
+                                _journal_cells(journal, coord, rid, changed, raw)
+                    except DecodeError as e:
+                        log.warning("rejected %s: %s", item.key, e)
+                    except PolyswarmError as e:
+                        log.warning("%s: %s", item.key, e)
+                for rid, got in coord.take_in():  # replayed and journaled on the pool
+                    if isinstance(got, MapError):
+                        _resync(coord, rid, got, resync)
+                behind = set(coord.needs_resync()) - resync
+                coord.gaps += len(behind)  # a last delta lost: announced, never received
+                resync |= behind
+                for solo in anchoring.coordinators():
+                    resync |= set(solo.needs_resync())
+                for rid in list(resync):
+                    owner = anchoring.owner(rid, coord)
+                    log.info("fetching the full map of %s", rid)
+                    owner.map_fetches += 1
+                    with owner.timed("fetch"):  # blocking: it delays the cycle
+                        got = bus.fetch_map(keys.robot(rid).map, timeout_s=2.0)
+                    owner.robot(rid).behind_since = owner.now  # next try after a pause
+                    if got is None:
+                        continue
+                    owner.fetch_bytes += len(got[0])
+                    try:
+                        before = owner.robot(rid).map
+                        with owner.timed("fetch"):
+                            owner.on_robot_map(rid, decode_any_map(got[0]))
+                        resync.discard(rid)
+                        mine = owner is coord and coord.pool is None  # else its worker's
+                        if mine and coord.robot(rid).map is not before:
+                            with coord.timed("journal"):
+                                persist.record(journal, "robot_map", rid, coord.robot(rid).map)
+                    except PolyswarmError as e:
+                        log.warning("map of %s refused: %s", rid, e)
+                for solo in anchoring.coordinators():  # their maps are not published
+                    if solo.flush_due():
+                        solo.flush()
+                    if solo.due():
+                        for rid, a in solo.cycle().assignments.items():
+                            solo.bytes_sent += bus.publish(
+                                keys.assignment(rid), a, solo.now, reliable=True
+                            )
+                coord.frames_pending = tuple(anchoring.waiting)
+                now = max([coord.now, *(s.now for s in anchoring.coordinators())])
+                for rid, anchor in anchoring.tick(coord, now):
+                    if anchor.own and coord.pool is None:  # withdrawn: journaled aside
+                        persist.record(journal, "robot_withdrawn", rid)
+                    coord.bytes_sent += bus.publish(keys.anchor(rid), anchor, now, reliable=True)
+                for rid, priors in joint.tick(coord, now, set(anchoring.audits)) if joint else []:
+                    coord.bytes_sent += bus.publish(keys.priors(rid), priors, now, reliable=True)
+                if coord.flush_due():
+                    delta = coord.flush()
+                    with coord.timed("publish"):
+                        _publish_delta(bus, keys, coord, delta, journal)
+                if coord.due():
+                    out = coord.cycle()
+                    with coord.timed("publish"):  # counted into the next cycle
+                        _publish_delta(bus, keys, coord, out.merged_delta, journal)
+                        for rid, a in out.assignments.items():
+                            coord.bytes_sent += bus.publish(
+                                keys.assignment(rid), a, coord.now, reliable=True
+                            )
+                    if out.status is not None:
+                        coord.bytes_sent += bus.publish(
+                            keys.coordinator_status, out.status, coord.now, reliable=True
+                        )
+        finally:
+            anchoring.close()
+            if joint is not None:
+                joint.close()
+            bus.close()
+            if pool is not None:  # what robots sent is replayed and journaled, merged below
+                coord.drain()
+                pool.close()
+            if journal is not None:  # what the robots sent is merged before it is written
+                delta = coord.flush(wait_s=DRAIN_TIMEOUT_S)
+                if delta is not None:
+                    persist.record(journal, "merged", encode_delta(delta), coord.merged)
+            if merger is not None:
+                merger.close()
+            log.info(
+                "robot map updates: %d merges replayed, %d cell deltas applied, %d map fetches",
+                coord.replayed_merges,
+                coord.applied_deltas,
+                coord.map_fetches,
+            )
+            if coord.stage_ms:
+                log.info(
+                    "coordinator thread's work by stage: %s",
+                    ", ".join(f"{k} {v:.0%}" for k, v in coord.stage_shares().items()),
+                )
+            if coord.merger_cpu_ms:
+                log.info(
+                    "merges on their process: processor time p95 %.1f ms, %.1f s in all; "
+                    "sent to taken in p95 %.0f ms",
+                    np.percentile(coord.merger_cpu_ms, 95),
+                    sum(coord.merger_cpu_ms) / 1e3,
+                    np.percentile(coord.merge_lag_ms, 95),
+                )
+            if coord.replay_cpu_ms or coord.worker_replay_cpu_ms:
+                r = np.asarray(coord.replay_cpu_ms or coord.worker_replay_cpu_ms)
+                log.info(
+                    "replays%s: processor time p50 %.1f ms, p95 %.1f ms, %.1f s in all",
+                    "" if pool is None else f" on {pool.workers} process(es)",
+                    np.median(r),
+                    np.percentile(r, 95),
+                    r.sum() / 1e3,
+                )
+    return coord
+
+
+def _robot_message(c: Coordinator, rid: str, item, resync: set) -> None:
+    """A robot's pose, status or map update for a coordinator that keeps no journal (a
+    robot exploring alone, ``agents.anchoring``)."""
+    msg = item.msg
+    if isinstance(msg, Pose):
+        c.on_pose(rid, item.stamp_s, msg)
+    elif isinstance(msg, RobotStatus):
+        c.on_status(rid, item.stamp_s, msg)
+    elif isinstance(msg, MapChunk) and item.payload is not None:
+        try:
+            c.on_robot_update(rid, item.stamp_s, msg.kind, item.payload)
+        except MapError as e:
+            _resync(c, rid, e, resync)
+
+
+def _resync(c: Coordinator, rid: str, e: MapError, resync: set) -> None:
+    log.info("resync of %s: %s", rid, e)
+    c.gaps += 1
+    resync.add(rid)
+
+
+def _journal_cells(
+    journal: persist.CoordinatorJournal | None,
+    coord: Coordinator,
+    rid: str,
+    changed: MapDelta | None,
+    wire: bytes | None = None,
+) -> None:
+    """A robot map update that applied, journaled as the cells it changed (``wire``:
+    already encoded, as a cell delta arrives)."""
+    if journal is None or changed is None:
+        return
+    with coord.timed("journal"):  # encoding it is the journal's work too
+        wire = wire or encode_delta(changed)
+        persist.record(journal, "robot_delta", rid, wire, coord.robot(rid).map)
+
+
+def _publish_delta(
+    bus,
+    keys: SwarmKeys,
+    coord: Coordinator,
+    delta: MapDelta | None,
+    journal: persist.CoordinatorJournal | None = None,
+) -> None:
+    if delta is None:
+        return
+    wire = encode_delta(delta)
+    persist.record(journal, "merged", wire, coord.merged)  # on disk before anyone has seen it
+    coord.bytes_sent += bus.publish_map(
+        keys.merged_delta, MapKind.DELTA, wire, delta.base_version, delta.version, coord.now
+    )
