@@ -316,6 +316,9 @@ def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) 
     }
 
 
+# the shared recordings from real lidars (the simulated TurtleBot3 bag is left out)
+REAL_BAGS = ("neato-office-1", "neato-square", "pioneer-hokuyo-corridor")
+
 # --- recordings --------------------------------------------------------------------------------
 
 
@@ -341,6 +344,28 @@ def record_log(path: Path, cfg: Config, seed: int = 0) -> Recording:
         if step.delta is not None:
             rec.add("r1", float(s.stamp), s.scan, step.pose, step.delta, step.op, step.correction)
     rec.maps["r1"] = slam.map
+    return rec
+
+
+def record_bag(path: Path, cfg: Config) -> Recording:
+    """PolySLAM over a recorded ROS bag with its own wheel odometry, as ``polyswarm slam``
+    runs it (``runners.slam.run_bag``: the mount from tf, the driver's no-return value,
+    evidence for a low-cost lidar): every keyframe's scan, delta and corrections."""
+    from polyswarm.runners.slam import run_bag
+
+    steps: list = []
+    run, used = run_bag(path, cfg, on_step=steps.append)
+    m = used.slam.mount
+    rec = Recording(
+        Path(path).stem,
+        mount=(m.x_m, m.y_m, m.yaw_rad),
+        free_range_m=used.slam.no_return_free_m,
+        map_precision_m=used.map.whole_map_precision_m,
+    )
+    for stamp, scan, step in steps:
+        if step.delta is not None:
+            rec.add("r1", stamp, scan, step.pose, step.delta, step.op, step.correction)
+    rec.maps["r1"] = run.slam.map
     return rec
 
 

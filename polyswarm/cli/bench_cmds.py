@@ -667,6 +667,9 @@ def bench_bandwidth(
     as_json: bool = JSON_OPT,
     save: str | None = SAVE_OPT,
     logs: bool = typer.Option(True, help="Measure every log of ../shared/data/logs."),
+    bags: bool = typer.Option(
+        True, help="Measure the real recordings of ../shared/data/bags (their own odometry)."
+    ),
     sim_world: str = typer.Option("office", help="World of the simulated exploration."),
     sim_robots: int = typer.Option(3, min=0, help="Robots of the simulated run (0: skip)."),
     sim_time: float = typer.Option(300.0, help="Simulated seconds of the exploration."),
@@ -690,6 +693,11 @@ def bench_bandwidth(
             for path in sorted((shared_data_dir() / "logs").glob("*.log*")):
                 task = progress.add_task(f"PolySLAM {path.name}", total=None)
                 recordings.append(bw.record_log(path, cfg, seed))
+                progress.remove_task(task)
+        if bags:
+            for name in bw.REAL_BAGS:
+                task = progress.add_task(f"PolySLAM {name}", total=None)
+                recordings.append(bw.record_bag(shared_data_dir() / "bags" / f"{name}.bag", cfg))
                 progress.remove_task(task)
         if sim_robots > 0:
             task = progress.add_task(f"exploring {sim_world} with {sim_robots}", total=None)

@@ -148,6 +148,7 @@ def run_bag(
     odom_topic: str | None = None,
     ros_distro: str = "humble",
     recording_slam: dict = RECORDING_SLAM,
+    on_step=None,
 ) -> tuple[SlamRun, Config]:
     """PolySLAM over a recorded ROS bag (ROS 1, or rosbag2 in mcap or sqlite3; one without
     message definitions read with ``ros_distro``'s): its scans with its wheel odometry at
@@ -157,7 +158,7 @@ def run_bag(
     turned by pi and mirrored (``slam.mountcheck``); the driver's way of reporting no
     return read off the scans. No ground truth: the run is judged by the sharpness of its
     map against odometry alone (``evaluation.maps.occupied_cells``). Returns the run and
-    the config it used."""
+    the config it used. ``on_step((stamp, scan, step))`` sees every step as it is made."""
     from protocols.bags import read_bag
     from protocols.tf import choose_mount
 
@@ -193,6 +194,8 @@ def run_bag(
         pose = odometry.at(scan.end_stamp)
         step = slam.process(scan, pose, deskew_motion(scan, odometry.at_many))
         spent += time.perf_counter() - t0
+        if on_step is not None:  # (scan end time, scan, step): what a robot would send
+            on_step((scan.end_stamp, scan, step))
         est.append(step.pose)
         odo.append(pose)
         if step.keyframe:
