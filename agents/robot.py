@@ -104,7 +104,8 @@ class AgentStats:
     distance_m: float = 0.0
     peer_returns_masked: int = 0  # scan returns taken for other robots, kept from SLAM
     refused: int = 0  # messages refused: undecodable, or a scan the agent could not use
-    slam_ms: list[float] = field(default_factory=list)
+    slam_ms: list[float] = field(default_factory=list)  # each keyframe's
+    slam_s: float = 0.0  # wall seconds spent in PolySLAM on every scan
 
 
 def safety_margin(lidar) -> float:
@@ -327,7 +328,9 @@ class RobotAgent:
         motion = deskew_motion(scan, self.odometry.at_many)
         # 2. PolySLAM: pose, and on keyframes the map delta (other robots are not walls)
         masked = self._without_peers(scan, stamp_s)
+        t0 = time.perf_counter()
         step = self.slam.process(masked, odom, motion, self._blobs_m(stamp_s))
+        self.stats.slam_s += time.perf_counter() - t0
         turned = abs(math.remainder(step.pose[2] - self.pose[2], 2 * math.pi))
         if step.anchored:
             turned = 0.0  # the frame moved, not the robot

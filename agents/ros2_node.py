@@ -95,6 +95,8 @@ class Ros2Node:
         self.marker_pub = self.node.create_publisher(MarkerArray, "polyswarm/frontiers", 10)
         self._cdr_pubs: dict = {}  # (topic template, ROS type) -> publisher
         self._published: tuple | None = None  # (map identity, version) last published
+        self._seen: tuple | None = None  # ... and last seen, at wall time _changed_at
+        self._changed_at = time.time()
         self._last_map_s = -math.inf
         self.maps_published = 0
         self.executor = SingleThreadedExecutor(context=self.context)
@@ -151,6 +153,8 @@ class Ros2Node:
         publication is ``MAP_PERIOD_S`` old; whether it was published."""
         now = time.monotonic()
         ident = (id(pmap), pmap.version)
+        if ident != self._seen:  # the map changed: stamped with when it was seen so
+            self._seen, self._changed_at = ident, time.time()
         if not force and (ident == self._published or now - self._last_map_s < MAP_PERIOD_S):
             return False
         if not pmap.cells:
@@ -171,7 +175,8 @@ class Ros2Node:
         grid = polymap_to_grid(pmap, MAP_RESOLUTION_M)
         msg = OccupancyGrid()
         msg.header.frame_id = self.io.map_frame
-        msg.header.stamp = self.node.get_clock().now().to_msg()
+        sec = math.floor(self._changed_at)  # the time of the map's change
+        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, int((self._changed_at - sec) * 1e9)
         rows, cols = grid.shape
         origin = Pose()
         origin.position.x, origin.position.y = float(grid.origin[0]), float(grid.origin[1])

@@ -146,6 +146,37 @@ def bench_sim(
     _emit(res, as_json, f"simulator on {res['world']} ({res['beams']} beams)", rows)
 
 
+@bench_app.command("ros2")
+def bench_ros2(
+    as_json: bool = JSON_OPT,
+    save: str | None = SAVE_OPT,
+    duration: float = typer.Option(30.0, min=5.0, help="Seconds of lidar stream per path."),
+) -> None:
+    """The agent as a ROS 2 node (rclpy, Fast DDS) against the Zenoh path: CPU, map latency."""
+    from rich.console import Console
+
+    from polyswarm.benchmarks import ros2
+
+    with Console(stderr=True).status("a 10 Hz 720-beam stream through each path"):
+        res = ros2.run(duration)
+    _save(save, res)
+    rows = []
+    for path, r in res["paths"].items():
+        rows += [
+            (f"{path}: scans mapped, of those sent", f"{100 * r['scans_processed']:.1f} %"),
+            (f"{path}: SLAM, share of one core", f"{100 * r['slam_share']:.1f} %"),
+            (
+                f"{path}: beyond SLAM, share of one core",
+                f"{100 * r['cpu_beyond_slam_share']:.1f} %",
+            ),
+        ]
+        if "map_latency_p95_s" in r:
+            rows.append(
+                (f"{path}: map change to subscriber, p95", f"{r['map_latency_p95_s']:.3f} s")
+            )
+    _emit(res, as_json, "ROS 2 node against the Zenoh path", rows)
+
+
 @bench_app.command("bags")
 def bench_bags(
     as_json: bool = JSON_OPT,
