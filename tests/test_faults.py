@@ -13,12 +13,14 @@ import sys
 import pytest
 
 
-def launch(tmp_path, *extra: str) -> tuple[dict, object]:
+def launch(tmp_path, *extra: str, returncode: int = 0) -> tuple[dict, object]:
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "2", "--world", "rooms"]
     cmd += ["--stop-coverage", "0.95", "--wall-limit", "120", "--out", str(out), *extra]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=240, check=False)
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.returncode == returncode, proc.stderr[-2000:]
+    if returncode:
+        assert proc.stderr.strip().splitlines()[-1].startswith("error: ")
     return json.loads((out / "metrics.json").read_text()), out
 
 
@@ -120,8 +122,9 @@ def test_no_restart_stops_the_mission_when_a_process_dies(tmp_path):
     threading.Thread(
         target=_kill_from_outside, args=(tmp_path / "run", "r1", 3.0, seen), daemon=True
     ).start()
-    m, _ = launch(tmp_path, "--no-restart", "--world", "office")
+    m, _ = launch(tmp_path, "--no-restart", "--world", "office", returncode=1)  # died for good
     assert m["stopped_because"] == "process exited: r1 (code -9)" and m["restarts"] == {}
+    assert m["crashed_processes"] == ["r1"]
 
 
 def test_coordinator_killed_and_restarted_rebuilds_the_merged_map(tmp_path):

