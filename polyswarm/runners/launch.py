@@ -543,9 +543,12 @@ def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
             c.proc.send_signal(sig)
 
 
-def _stop_children(children: list[Child]) -> dict[str, int | None]:
+def _stop_children(children: list[Child]) -> tuple[dict[str, int | None], set[str]]:
     """The simulator and agents first, then (once they are gone, so that the last deltas
-    they sent reach the coordinator) the coordinator and router; SHUTDOWN_S in all."""
+    they sent reach the coordinator) the coordinator and router; SHUTDOWN_S in all. The
+    exit codes, and the children still running when the stop began (one killed for not
+    stopping in time was stopped by the launch, not crashed)."""
+    running = {c.name for c in children if c.proc.poll() is None}
     deadline = time.monotonic() + SHUTDOWN_S
     hub = [c for c in children if c.name in HUB]
     for group, until in (
@@ -566,7 +569,7 @@ def _stop_children(children: list[Child]) -> dict[str, int | None]:
                     time.sleep(STACK_DUMP_S)
                 c.proc.kill()
                 c.proc.wait()
-    return {c.name: c.proc.returncode for c in children}
+    return {c.name: c.proc.returncode for c in children}, running
 
 
 # --- the launch ----------------------------------------------------------------------------------
@@ -699,13 +702,14 @@ def launch(
             finally:
                 bus.close()
     finally:
-        codes = _stop_children(children)
+        codes, running = _stop_children(children)
     wall = time.monotonic() - t0
     injected = {f.target for f in opts.faults if f.action == FaultAction.KILL}
     crashed = {
         k: v
         for k, v in codes.items()
-        if v not in (0, -signal.SIGTERM, 130) and not (k in injected and v == -signal.SIGKILL)
+        if v not in (0, -signal.SIGTERM, 130)
+        and not ((k in injected or k in running) and v == -signal.SIGKILL)
     }
     m = obs.metrics(wall, opts)
     m["exit_codes"] = codes
