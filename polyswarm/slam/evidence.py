@@ -210,21 +210,28 @@ class EvidenceGrid:
         on = any_stop & inside[k, first] & occ[rc[k, first], cc[k, first]]
         return reach, on
 
+    def window_around(self, xy, radius_m: float) -> tuple[int, int, int, int]:
+        """The array rows i0:i1 and columns j0:j1 of the cells within ``radius_m`` of
+        ``xy`` (world metres), clipped to the grid."""
+        rows, cols = self.shape
+        fj, fi = (int(v) for v in self.first)
+        i0 = max(math.floor((xy[1] - radius_m) / self.res) - fi, 0)
+        j0 = max(math.floor((xy[0] - radius_m) / self.res) - fj, 0)
+        i1 = min(math.ceil((xy[1] + radius_m) / self.res) + 1 - fi, rows)
+        j1 = min(math.ceil((xy[0] + radius_m) / self.res) + 1 - fj, cols)
+        return i0, i1, j0, j1
+
     # -- internals ------------------------------------------------------------------------
 
     def _window(self, origin: np.ndarray, radius_m: float):
         """Free (small unknown gaps bridged) and near-occupied masks of the cells within
         ``radius_m`` of ``origin``, with the window's corner."""
-        rows, cols = self.shape
-        fj, fi = (int(v) for v in self.first)
-        i0 = max(math.floor((origin[1] - radius_m) / self.res) - fi, 0)
-        j0 = max(math.floor((origin[0] - radius_m) / self.res) - fj, 0)
-        i1 = min(math.ceil((origin[1] + radius_m) / self.res) + 1 - fi, rows)
-        j1 = min(math.ceil((origin[0] + radius_m) / self.res) + 1 - fj, cols)
+        i0, i1, j0, j1 = self.window_around(origin, radius_m)
         free, occ = self.masks((i0, i1, j0, j1))
         seen = self._sub((i0, i1, j0, j1)).any(axis=0)
         gaps = ~seen & ndimage.binary_closing(free, np.ones((3, 3), dtype=bool))
         near = ndimage.binary_dilation(occ, iterations=NEAR_OBSTACLE_CELLS)
+        fj, fi = (int(v) for v in self.first)
         x0 = (fj + j0) * self.res
         y0 = (fi + i0) * self.res
         return free | gaps, near, x0, y0

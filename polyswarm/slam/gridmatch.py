@@ -36,12 +36,7 @@ DAMPING = 1e-3  # Levenberg damping of the normal equations
 def wall_points(grid: EvidenceGrid, xy, radius_m: float):
     """The evidence's wall points within ``radius_m`` of ``xy`` (the mean of each
     occupied cell's returns) and the unit normals of the walls there; None if none."""
-    rows, cols = grid.shape
-    fj, fi = (int(v) for v in grid.first)
-    i0 = max(math.floor((xy[1] - radius_m) / grid.res) - fi, 0)
-    j0 = max(math.floor((xy[0] - radius_m) / grid.res) - fj, 0)
-    i1 = min(math.ceil((xy[1] + radius_m) / grid.res) + 1 - fi, rows)
-    j1 = min(math.ceil((xy[0] + radius_m) / grid.res) + 1 - fj, cols)
+    i0, i1, j0, j1 = grid.window_around(xy, radius_m)
     if i1 - i0 < 3 or j1 - j0 < 3:
         return None
     occ, pts = grid.hit_centroids((i0, i1, j0, j1))
