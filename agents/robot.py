@@ -33,6 +33,7 @@ from polyswarm.frames.sighting import PROFILE_PERIOD_S, clear_profile
 from polyswarm.nav.control import ControlParams, PathFollower
 from polyswarm.nav.navgraph import NavGraph, clear_of
 from polyswarm.nav.planner import Planner
+from polyswarm.nav.recent import RecentReturns
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, VectorType
 from polyswarm.se2 import compose, transform_points
 from polyswarm.slam.follow import CorrectionOp, pose_of
@@ -157,6 +158,7 @@ class RobotAgent:
         self.merged: GridPolyMap | None = None
         self._mount_said = False  # the lidar mount's source was logged
         self.seen = SeenObstacles()  # obstacles the lidar sees and the planning map lacks
+        self.recent = RecentReturns()  # the last seconds' close returns, for the controller
         self._now_s = 0.0
         self.merged_graph: NavGraph | None = None
         self.own_graph: NavGraph | None = None
@@ -349,7 +351,8 @@ class RobotAgent:
         xy = pts.xy[pts.valid]
         world = transform_points(self.pose, xy)
         self._remember_unmapped(stamp_s, world)
-        out.cmd = self.behaviour.step(stamp_s, self.pose, xy, self._unexplained(world), turned)
+        obstacles, moving = self._obstacles(stamp_s, odom, xy, world)
+        out.cmd = self.behaviour.step(stamp_s, self.pose, obstacles, moving, turned)
         self.follower.sent(*out.cmd)  # arcs start from what the base does
         # 4. pose and state for the coordinator
         if stamp_s - self._last_pose_t >= POSE_PERIOD_S or step.delta is not None:
@@ -433,6 +436,17 @@ class RobotAgent:
         self.seen.forget_seen_through(world, self.pose[:2])
         keep = ~self._near_peers(world, stamp_s)
         self.seen.add(stamp_s, world[keep], self.pose[:2], pmap)
+
+    def _obstacles(self, stamp_s: float, odom, xy: np.ndarray, world: np.ndarray):
+        """What the controller keeps clear of, (n, 2) in the robot frame, and which of it
+        the map does not explain: this scan's returns and the last seconds' close ones
+        (``polyswarm.nav.recent``: a dark wall returns a few beams per scan), other
+        robots' left out of the memory (they move)."""
+        keep = ~self._near_peers(world, stamp_s)
+        self.recent.add(stamp_s, odom, xy[keep])
+        remembered = self.recent.points(stamp_s, odom)
+        moving = np.concatenate([self._unexplained(world), np.zeros(len(remembered), bool)])
+        return np.concatenate([xy, remembered]), moving
 
     def _unexplained(self, world: np.ndarray) -> np.ndarray:
         """Scan points (world frame) farther than ``UNEXPLAINED_M`` from every obstacle

@@ -17,11 +17,10 @@ the mission ended at 76 % coverage; launch at unknown starts, seed 0.)
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from polyswarm.nav.navgraph import clear_of
+from polyswarm.nav.recent import seen_through
 from polyswarm.polymap import GridPolyMap, VectorType
 
 SEEN_RANGE_M = 1.5  # returns this close are remembered (where the robot is about to drive)
@@ -31,11 +30,6 @@ UNMAPPED_M = 0.15
 SEEN_KEEP_S = 60.0  # remembered this long (a door may open, a person walk on)
 SEEN_VOXEL_M = 0.05  # one point kept per square this wide
 SEEN_MAX = 2000  # points kept at most (the oldest go first)
-# a remembered point is seen through when every return within this bearing of it (as the
-# robot sees it, radians) is farther by CLEAR_MARGIN_M: wide enough to hold two beams of a
-# 1-degree lidar (TurtleBot3, RPLIDAR), narrow enough that a wall beside it is not in it
-CLEAR_HALF_ANGLE_RAD = math.radians(1.0)
-CLEAR_MARGIN_M = 0.1  # beyond the point by more than a return's noise (2-6 cm)
 
 
 class SeenObstacles:
@@ -68,31 +62,13 @@ class SeenObstacles:
     def forget_seen_through(self, world_xy: np.ndarray, robot_xy) -> int:
         """Forget the remembered points a scan sees through: ``world_xy`` (n, 2) every
         return of the scan (world frame, other robots' too: they hide what is behind
-        them), seen from ``robot_xy``. A point is seen through where the scan has returns
-        within ``CLEAR_HALF_ANGLE_RAD`` of its bearing and all of them lie at least
-        ``CLEAR_MARGIN_M`` beyond it; a bearing without returns says nothing. Returns
+        them), seen from ``robot_xy`` (``polyswarm.nav.recent.seen_through``). Returns
         how many were forgotten."""
-        pts = np.asarray(world_xy, dtype=float).reshape(-1, 2)
-        if not self._points or not len(pts):
+        if not self._points:
             return 0
-        here = np.asarray(robot_xy, dtype=float)[:2]
-        rel = pts - here
-        bearing, rng = np.arctan2(rel[:, 1], rel[:, 0]), np.hypot(rel[:, 0], rel[:, 1])
-        order = np.argsort(bearing)
-        bearing, rng = bearing[order], rng[order]
-        # the bearings once more on either side: a point near +-pi sees both ends
-        bearing = np.concatenate([bearing - 2 * math.pi, bearing, bearing + 2 * math.pi])
-        rng = np.concatenate([rng, rng, rng])
         keys = list(self._points)
-        mem = np.array([self._points[k][:2] for k in keys]) - here
-        mb, md = np.arctan2(mem[:, 1], mem[:, 0]), np.hypot(mem[:, 0], mem[:, 1])
-        lo = np.searchsorted(bearing, mb - CLEAR_HALF_ANGLE_RAD, side="left")
-        hi = np.searchsorted(bearing, mb + CLEAR_HALF_ANGLE_RAD, side="right")
-        # the nearest return of each point's bearings: rng[lo:hi].min(), all at once
-        # (reduceat over lo, hi pairs; an inf at the end stands for "no more returns")
-        pairs = np.column_stack([lo, hi]).ravel()
-        nearest = np.minimum.reduceat(np.append(rng, np.inf), pairs)[::2]
-        through = (hi > lo) & (nearest >= md + CLEAR_MARGIN_M)
+        mem = np.array([self._points[k][:2] for k in keys])
+        through = seen_through(mem, world_xy, robot_xy)
         for k in np.flatnonzero(through):
             del self._points[keys[k]]
         return int(through.sum())

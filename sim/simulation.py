@@ -398,6 +398,16 @@ class Simulation:
                 break
             if not r.blocked:  # report a contact once, when it starts
                 self.collisions.append(CollisionEvent(r.index, self.time, other))
+                log.info(
+                    "%s touched %s at %.1f s (x %.2f m, y %.2f m, heading %.2f rad, v %.2f m/s)",
+                    r.name,
+                    "a wall" if other is None else f"robot {other}",
+                    self.time,
+                    x,
+                    y,
+                    th,
+                    r.v,
+                )
                 if other is None:
                     r.wall_collisions += 1
                 else:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.seen import CLEAR_MARGIN_M, SEEN_KEEP_S, SEEN_RANGE_M, SeenObstacles
+from agents.seen import SEEN_KEEP_S, SEEN_RANGE_M, SeenObstacles
+from polyswarm.nav.recent import CLEAR_MARGIN_M
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon
 from tests.conftest import O
 
