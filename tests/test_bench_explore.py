@@ -58,7 +58,8 @@ def test_summary_gives_per_profile_and_world_the_seeds_the_reference_and_the_wor
         _row("office", 3, 2, None),  # never reached 99 %
         _row("rooms", 3, 0, 50.0, wall_collisions=1),  # reached, but hit a wall
     ]
-    res = summarise(rows, {("turtlebot3", "office", 3): 160.0, ("turtlebot3", "rooms", 3): 40.0})
+    refs = {("turtlebot3", "office", 3, seed): 160.0 for seed in range(3)}
+    res = summarise(rows, refs | {("turtlebot3", "rooms", 3, 0): 40.0})
     office = res["profiles"]["turtlebot3"]["office"]["3"]
     assert office["t99_s"] == [200.0, 300.0, None]
     assert office["t99_median_s"] == 300.0  # the failed run counts as infinitely slow
@@ -70,6 +71,18 @@ def test_summary_gives_per_profile_and_world_the_seeds_the_reference_and_the_wor
     rooms = res["profiles"]["turtlebot3"]["rooms"]["3"]
     assert rooms["success_rate"] == 0.0 and rooms["t99_ratio_vs_reference"] == 50.0 / 40.0
     assert res["success_rate"] == 2 / 4 and res["wall_collisions"] == 1
+
+
+def test_each_seed_of_a_seeded_world_is_divided_by_the_reference_on_its_own_layout():
+    from polyswarm.benchmarks.explore import summarise
+
+    rows = [_row("furnished", 3, s, t) for s, t in ((0, 100.0), (1, 300.0), (2, 200.0))]
+    refs = {("turtlebot3", "furnished", 3, 0): 100.0, ("turtlebot3", "furnished", 3, 1): 250.0}
+    refs[("turtlebot3", "furnished", 3, 2)] = 80.0  # a small layout: the worst ratio
+    cell = summarise(rows, refs)["profiles"]["turtlebot3"]["furnished"]["3"]
+    assert cell["reference_t99_s"] == 100.0  # the median of the three references
+    assert cell["t99_ratio_vs_reference"] == 200.0 / 100.0
+    assert cell["t99_ratio_vs_reference_worst"] == 200.0 / 80.0  # seed 0's would be 3.0
 
 
 def test_plan_runs_carry_the_profile():

@@ -197,11 +197,16 @@ def summarise(rows: list[dict], references: dict | None = None) -> dict:
     profiles: dict = {}
     for prof, worlds in per.items():
         for w, by_n in worlds.items():
-            for n, rs in by_n.items():
-                t99 = [r["t99_s"] for r in sorted(rs, key=lambda r: r["seed"])]
+            for n, runs in by_n.items():
+                rs = sorted(runs, key=lambda r: r["seed"])
+                t99 = [r["t99_s"] for r in rs]
                 med = _median_or_none(t99)
-                ref = references.get((prof, w, int(n)))
-                ratios = [None if t is None or not ref else t / ref for t in t99]
+                # each run against the reference's run on its own seed's layout
+                refs = [references.get((prof, w, int(n), r["seed"])) for r in rs]
+                ref = _median_or_none(refs) if all(refs) else None
+                ratios = [
+                    None if t is None or not f else t / f for t, f in zip(t99, refs, strict=True)
+                ]
                 profiles.setdefault(prof, {}).setdefault(w, {})[n] = {
                     "t99_s": t99,
                     "t99_median_s": med,
@@ -376,7 +381,7 @@ def run(
     for k, spec in enumerate(runs):
         if on_run:
             on_run(k, len(runs), spec, None)
-        key = (spec.profile, spec.world, spec.robots)
+        key = (spec.profile, spec.world, spec.robots, spec.seed)  # seeded layouts differ
         if spec.strategy == "hungarian" and spec.start == "side-by-side" and key not in references:
             references[key] = reference_t99(spec)
         name = f"{spec.profile}-{spec.world.replace(':', '_')}-{spec.robots}-{spec.strategy}"

@@ -6,8 +6,9 @@ loaded as a module, given the profile's range, field of view, speed and radius a
 robot 0's start, and scored with the same coverage definition as our runs
 (``polyswarm.evaluation.coverage.reachable_free``: its ground truth is the free space within the
 robot's radius of its reachable cells already; the band of ``coverage_tolerance`` along
-obstacles is taken off it too). Procedural worlds are rasterised to map_server files at
-``RASTER_M`` first. Results are cached on disk: the reference is deterministic.
+obstacles is taken off it too, as the same whole number of cells: ``raster_m``).
+Procedural worlds are rasterised to map_server files first. Results are cached on disk:
+the reference is deterministic.
 
     ref = reference_run("data:loop", 3, cfg, start_xy=(2.0, 2.0), tolerance_m=0.2)
     ref["t99_s"]
@@ -32,9 +33,18 @@ from polyswarm.grids.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 
 log = logging.getLogger(__name__)
 
-RASTER_M = 0.05  # procedural worlds on the grid of a typical map_server map
+RASTER_M = 0.05  # procedural worlds on the grid of a typical map_server map, or finer:
 CACHE_DIR = Path("runs") / "reference-cache"
 STRATEGY = {1: "nearest", 3: "hungarian"}  # one robot: the reference's event-driven single
+
+
+def raster_m(tolerance_m: float) -> float:
+    """The cell size a procedural world is rasterised at for a coverage band of
+    ``tolerance_m``: ``RASTER_M`` or finer, so that the band is a whole number of cells
+    (the thesis sensor's 2 cm band would be no cell at all at 5 cm)."""
+    if tolerance_m <= 0:
+        return RASTER_M
+    return tolerance_m / math.ceil(tolerance_m / RASTER_M - 1e-9)
 
 
 def reference_module():
@@ -89,6 +99,7 @@ def reference_run(
         "radius_m": base.radius_m,
         "start": [round(start_xy[0], 3), round(start_xy[1], 3)],
         "tolerance_m": round(tolerance_m, 4),
+        "raster_m": None if world.grid is not None else round(raster_m(tolerance_m), 6),
         "strategy": STRATEGY.get(robots, "hungarian"),
         "reference_sha": _file_sha(shared_data_dir().parent / "tools" / "explore_reference.py"),
     }
@@ -97,7 +108,7 @@ def reference_run(
     if cached.exists():
         return json.loads(cached.read_text())
     cache_dir.mkdir(parents=True, exist_ok=True)
-    yaml_path = _map_file(world, world_spec, cache_dir, key)
+    yaml_path = _map_file(world, world_spec, cache_dir, key, raster_m(tolerance_m))
     mod = reference_module()
     mod.RANGE, mod.FOV_DEG = params["range_m"], params["fov_deg"]
     mod.SPEED, mod.R_ROBOT = params["speed_mps"], params["radius_m"]
@@ -105,15 +116,15 @@ def reference_run(
     mod.WORLDS[name] = str(yaml_path)
     mod.START_ANCHOR[name] = tuple(start_xy)
     w = mod.World(name)
-    _erode_truth(w, tolerance_m)
+    band_m = _erode_truth(w, tolerance_m)
     log.info("reference: %s, %d robot(s), %s (%d truth cells)", world_spec, robots, params, w.n_gt)
     row = mod.Sim(w, params["strategy"], robots).run()
-    row |= {"params": params, "truth_m2": w.n_gt * w.res**2}
+    row |= {"params": params, "truth_m2": w.n_gt * w.res**2, "band_m": band_m}
     cached.write_text(json.dumps(row))
     return row
 
 
-def _map_file(world, world_spec: str, cache_dir: Path, key: str) -> Path:
+def _map_file(world, world_spec: str, cache_dir: Path, key: str, resolution_m: float) -> Path:
     if world.grid is not None and world_spec.endswith((".yaml", ".yml")):
         return Path(world_spec).resolve()
     if world_spec.startswith("data:"):
@@ -123,21 +134,24 @@ def _map_file(world, world_spec: str, cache_dir: Path, key: str) -> Path:
     from polyswarm.io.mapserver import write_map
 
     path = cache_dir / f"{key}.yaml"
-    write_map(rasterise(world), path)
+    write_map(rasterise(world, resolution_m), path)
     return path.resolve()
 
 
-def _erode_truth(w, tolerance_m: float) -> None:
+def _erode_truth(w, tolerance_m: float) -> float:
     """Take the band of ``tolerance_m`` along the truth's boundary off the reference's
-    ground truth (cells farther than the tolerance from any cell outside it stay)."""
+    ground truth ``w.gt`` (cells of ``w.res`` metres): the nearest whole number of cells,
+    those at most that many cells from one outside it. Returns the band taken off (m):
+    ``tolerance_m`` itself where the raster was chosen for it (``raster_m``)."""
     from scipy import ndimage
 
-    cells = tolerance_m / w.res
+    cells = round(tolerance_m / w.res)
     if cells <= 0:
-        return
-    dist = ndimage.distance_transform_edt(w.gt)
-    w.gt = dist > cells
+        return 0.0
+    dist = ndimage.distance_transform_edt(w.gt)  # cells to the nearest cell outside
+    w.gt = dist > cells + 1e-9
     w.n_gt = int(w.gt.sum())
+    return cells * w.res
 
 
 def _file_sha(path: Path) -> str:
