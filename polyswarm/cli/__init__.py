@@ -20,6 +20,21 @@ import typer
 from polyswarm import __version__
 from polyswarm.errors import PolyswarmError
 
+
+def _flags_take_no_value() -> None:
+    """typer 0.29 prints ``<bool>`` beside every flag in ``--help``, as if it took a
+    value; a flag's help shows none."""
+    from typer.core import TyperOption
+
+    shown = TyperOption.display_type_rich
+
+    def display_type_rich(self, ctx):
+        return None if self.is_flag else shown(self, ctx)
+
+    TyperOption.display_type_rich = display_type_rich
+
+
+_flags_take_no_value()
 app = typer.Typer(
     help="polyswarm: multi-robot exploration with polygon maps (PolyMap), PolySLAM and Zenoh.",
     no_args_is_help=True,

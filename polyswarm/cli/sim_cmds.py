@@ -30,7 +30,9 @@ def sim_cmd(
     speed: float | None = typer.Option(
         None, help="--serve: simulated seconds per wall second (0: as fast as agents allow)."
     ),
-    endpoint: str | None = typer.Option(None, help="--serve: Zenoh router endpoint."),
+    connect: str | None = typer.Option(
+        None, help="--serve: Zenoh router to connect to (default: comms.endpoint)."
+    ),
     zenoh_config: Path | None = typer.Option(None, help="--serve: Zenoh JSON5 config file."),
     wait_coordinator: bool = typer.Option(
         False, help="--serve: start time only once the coordinator is up (as well as agents)."
@@ -53,7 +55,7 @@ def sim_cmd(
     cfg = with_overrides(load_cfg(config, profile), {"sim": {"seed": seed}})
     w = load_world(world, seed=seed)
     if serve:
-        _serve(cfg, w, robots, speed, endpoint, zenoh_config, gui, wait_coordinator)
+        _serve(cfg, w, robots, speed, connect, zenoh_config, gui, wait_coordinator)
         return
     trails: list[list] = [[] for _ in range(robots)]
     t0 = time.perf_counter()
@@ -104,7 +106,7 @@ def plot_world(world, trajectories, path: Path) -> None:
 
 
 def _serve(
-    cfg, world, robots: int, speed, endpoint, zenoh_config, gui: bool, wait_coordinator: bool
+    cfg, world, robots: int, speed, connect, zenoh_config, gui: bool, wait_coordinator: bool
 ) -> None:
     import dataclasses
 
@@ -119,7 +121,7 @@ def _serve(
             cfg, robots=tuple(RobotEntry(f"r{k + 1}", tuple(p)) for k, p in enumerate(starts))
         )
     spec = SessionSpec.client(
-        endpoint or cfg.comms.endpoint, str(zenoh_config or cfg.comms.zenoh_config or "")
+        connect or cfg.comms.endpoint, str(zenoh_config or cfg.comms.zenoh_config or "")
     )
     wait_for = ("agents", "coordinator") if wait_coordinator else ("agents",)
     sim = serve(cfg, world, spec, stop_on_signals(), speed=speed, gui=gui, wait_for=wait_for)

@@ -11,8 +11,8 @@ from polyswarm.cli import PROFILE_HELP, app, exit_now, load_cfg
 from polyswarm.errors import ConfigError, SimulationError
 
 CONFIG_OPT = typer.Option(None, "--config", "-c", help="TOML config file.")
-ENDPOINT_HELP = "Zenoh endpoint of the router (default: comms.endpoint of the config)."
-ZENOH_HELP = "Zenoh JSON5 config file (LAN, TLS, ACL); --endpoint still applies."
+CONNECT_HELP = "Zenoh router to connect to, e.g. tcp/10.0.0.5:7447 (default: comms.endpoint)."
+ZENOH_HELP = "Zenoh JSON5 config file (LAN, TLS, ACL); --connect or --listen still applies."
 
 
 def _pose(text: str | None):
@@ -31,7 +31,7 @@ def _pose(text: str | None):
 def agent_cmd(
     robot_id: str = typer.Option(..., "--id", help="Robot id (a key chunk, e.g. r1)."),
     config: Path | None = CONFIG_OPT,
-    endpoint: str | None = typer.Option(None, help=ENDPOINT_HELP),
+    connect: str | None = typer.Option(None, help=CONNECT_HELP),
     zenoh_config: Path | None = typer.Option(None, help=ZENOH_HELP),
     start: str | None = typer.Option(
         None, help="Start pose x,y,theta (metres, radians) in the shared map frame."
@@ -144,7 +144,7 @@ def agent_cmd(
     if listen:
         spec = SessionSpec.router(listen, zconf)
     else:
-        spec = SessionSpec.client(endpoint or cfg.comms.endpoint, zconf)
+        spec = SessionSpec.client(connect or cfg.comms.endpoint, zconf)
     agent = run_agent(
         robot_id,
         cfg,
@@ -174,9 +174,7 @@ def agent_cmd(
 
 @app.command("view")
 def view_cmd(
-    connect: str | None = typer.Option(
-        None, help="Zenoh router to connect to, e.g. tcp/10.0.0.5:7447 (default: comms.endpoint)."
-    ),
+    connect: str | None = typer.Option(None, help=CONNECT_HELP),
     config: Path | None = CONFIG_OPT,
     swarm: str | None = typer.Option(None, help="Swarm name (default: comms.swarm)."),
     zenoh_config: Path | None = typer.Option(None, help=ZENOH_HELP),
@@ -430,7 +428,9 @@ def launch_cmd(
 def fleet_config_cmd(
     robots: str = typer.Option(..., help="Robot ids, comma separated (e.g. r1,r2,r3)."),
     swarm: str = typer.Option("lab", help="Swarm name (the key prefix polyswarm/<swarm>)."),
-    listen: str = typer.Option("tls/0.0.0.0:7447", help="Router endpoint."),
+    listen: str = typer.Option(
+        "tls/0.0.0.0:7447", help="Endpoint the coordinator's router listens on."
+    ),
     users_file: str = typer.Option("/etc/polyswarm/users.txt", help="user:password lines."),
     certs: str = typer.Option("/etc/polyswarm/certs", help="Folder of ca.pem, router.pem, ..."),
     mtls: bool = typer.Option(True, help="Require client certificates (mTLS)."),
