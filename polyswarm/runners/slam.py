@@ -30,7 +30,7 @@ from polyswarm.se2 import compose
 from polyswarm.slam.mountcheck import check_mount
 from polyswarm.slam.odometry import IncrementNoise, OdometryBuffer, noisy_odometry
 from polyswarm.slam.polyslam import PolySlam
-from polyswarm.slam.scan import classify, deskew_motion
+from polyswarm.slam.scan import LaserScan, classify, deskew_motion
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +69,83 @@ def finish(slam: PolySlam) -> tuple[np.ndarray, GridPolyMap | None, float]:
     return slam.trajectory(), final_map, time.perf_counter() - t0
 
 
+@dataclass(frozen=True)
+class ScanIn:
+    """One scan as a source (a log, a bag, a simulated world) hands it to the SLAM loop."""
+
+    scan: LaserScan
+    odom: np.ndarray  # odometry at the scan's end (what PolySLAM is given)
+    odom_map: np.ndarray  # the same in the map frame (the odometry-only baseline)
+    odometry_at_many: Callable | None = None  # odometry over time: the sweep is de-skewed
+    truth: np.ndarray | None = None  # ground truth, where there is one
+    done: float = 0.0  # progress: this much of ``total`` is done
+    total: float = 0.0
+
+
+@dataclass
+class Trace:
+    """What the SLAM loop saw and did, per scan and per keyframe."""
+
+    stamps: list = field(default_factory=list)  # each scan's end (s)
+    online: list = field(default_factory=list)  # each pose as estimated when it came in
+    odometry: list = field(default_factory=list)  # ``ScanIn.odom_map``
+    truth: list = field(default_factory=list)
+    keyframe_ms: list = field(default_factory=list)
+    stage_ms: list = field(default_factory=list)
+    spent_s: float = 0.0  # in de-skewing and ``PolySlam.process``
+
+
+def run_slam(slam: PolySlam, scans, progress: Progress | None = None, on_step=None) -> Trace:
+    """The one SLAM loop: every ``ScanIn`` of ``scans`` through ``slam``.
+    ``on_step((stamp, scan, step))`` sees every step as it is made (what a robot sends)."""
+    trace = Trace()
+    for item in scans:
+        t0 = time.perf_counter()
+        motion = None
+        if item.odometry_at_many is not None:
+            motion = deskew_motion(item.scan, item.odometry_at_many)
+        step = slam.process(item.scan, item.odom, motion)
+        trace.spent_s += time.perf_counter() - t0
+        if on_step is not None:
+            on_step((item.scan.end_stamp, item.scan, step))
+        trace.stamps.append(item.scan.end_stamp)
+        trace.online.append(step.pose)
+        trace.odometry.append(item.odom_map)
+        if item.truth is not None:
+            trace.truth.append(item.truth)
+        if step.keyframe:
+            trace.keyframe_ms.append(step.timings_ms["total"])
+            trace.stage_ms.append(step.timings_ms)
+        if progress:
+            progress(item.done, item.total)
+    return trace
+
+
+def _slam_run(name: str, slam: PolySlam, trace: Trace, simulated: bool, info: dict, **kw):
+    """The ``SlamRun`` of a finished loop: the trajectory optimised, the map rebuilt
+    (``finish``, counted in the processing time)."""
+    final, final_map, rebuild_s = finish(slam)
+    stamps = np.array(trace.stamps)
+    stream_s = kw.pop("stream_s", float(stamps[-1] - stamps[0]) if len(stamps) > 1 else 0.0)
+    return SlamRun(
+        name,
+        stamps,
+        final,
+        kw.pop("reference", np.array(trace.truth) if trace.truth else None),
+        np.array(trace.odometry),
+        slam,
+        trace.keyframe_ms,
+        trace.spent_s + rebuild_s,
+        stream_s,
+        simulated,
+        info,
+        online=np.array(trace.online),
+        final_map=final_map,
+        stage_ms=trace.stage_ms,
+        **kw,
+    )
+
+
 class OdometrySource(StrEnum):
     LOG = "log"  # the robot's real wheel odometry from the log's ODOM lines
     NOISE = "noise"  # synthetic noise on the reference increments (seeded)
@@ -94,31 +171,15 @@ def run_log(
         odom = noisy_odometry(ref, noise, seed)
         described = noise.describe()
     slam = PolySlam(cfg.slam, cfg.map.cell_size_m, initial_pose=ref[0], keep_trajectory=True)
-    est, kf_ms, stages = [], [], []
-    spent = 0.0
-    for k, s in enumerate(carmen.scans):
-        t0 = time.perf_counter()
-        step = slam.process(s.scan, odom[k])
-        spent += time.perf_counter() - t0
-        est.append(step.pose)
-        if step.keyframe:
-            kf_ms.append(step.timings_ms["total"])
-            stages.append(step.timings_ms)
-        if progress:
-            progress(k + 1, len(carmen.scans))
-    stamps = np.array([s.stamp for s in carmen.scans])
-    final, final_map, rebuild_s = finish(slam)
-    spent += rebuild_s
-    return SlamRun(
+    n = len(carmen.scans)
+    scans = (
+        ScanIn(s.scan, odom[k], odom[k], done=k + 1, total=n) for k, s in enumerate(carmen.scans)
+    )
+    trace = run_slam(slam, scans, progress)
+    return _slam_run(
         Path(path).name.split(".")[0],
-        stamps,
-        final,
-        ref,
-        odom,
         slam,
-        kf_ms,
-        spent,
-        float(stamps[-1] - stamps[0]) if len(stamps) > 1 else 0.0,
+        trace,
         False,
         {
             "log": str(path),
@@ -131,9 +192,7 @@ def run_log(
             "seed": seed,
             "reference": "the log's corrected poses (gmapping), good to a few centimetres",
         },
-        online=np.array(est),
-        final_map=final_map,
-        stage_ms=stages,
+        reference=ref,
     )
 
 
@@ -187,24 +246,12 @@ def run_bag(
         keep_trajectory=True,
         out_of_range=cfg.sim.lidar.out_of_range,
     )
-    est, odo, kf_ms, stages = [], [], [], []
-    spent = 0.0
-    for k, scan in enumerate(scans):
-        t0 = time.perf_counter()
-        pose = odometry.at(scan.end_stamp)
-        step = slam.process(scan, pose, deskew_motion(scan, odometry.at_many))
-        spent += time.perf_counter() - t0
-        if on_step is not None:  # (scan end time, scan, step): what a robot would send
-            on_step((scan.end_stamp, scan, step))
-        est.append(step.pose)
-        odo.append(pose)
-        if step.keyframe:
-            kf_ms.append(step.timings_ms["total"])
-            stages.append(step.timings_ms)
-        if progress:
-            progress(k + 1, len(scans))
-    final, final_map, rebuild_s = finish(slam)
-    stamps = np.array([s.end_stamp for s in scans])
+    items = (
+        ScanIn(sc, pose, pose, odometry.at_many, done=k + 1, total=len(scans))
+        for k, sc in enumerate(scans)
+        for pose in (odometry.at(sc.end_stamp),)
+    )
+    trace = run_slam(slam, items, progress, on_step)
     mount_t = _mount_tuple(cfg)
     info = {
         "bag": str(path),
@@ -220,25 +267,10 @@ def run_bag(
         "no_return_share": bag.no_return_share,
         "message_definitions": bag.definitions,
         "odometry": "the bag's wheel odometry",
-        "occupied_cells_5cm": evm.occupied_cells(scans, final, mount_t),
-        "odometry_occupied_cells_5cm": evm.occupied_cells(scans, np.array(odo), mount_t),
+        "odometry_occupied_cells_5cm": evm.occupied_cells(scans, np.array(trace.odometry), mount_t),
     }
-    run = SlamRun(
-        Path(path).name.split(".")[0],
-        stamps,
-        final,
-        None,
-        np.array(odo),
-        slam,
-        kf_ms,
-        spent + rebuild_s,
-        float(stamps[-1] - stamps[0]) if len(stamps) > 1 else 0.0,
-        False,
-        info,
-        online=np.array(est),
-        final_map=final_map,
-        stage_ms=stages,
-    )
+    run = _slam_run(Path(path).name.split(".")[0], slam, trace, False, info)
+    run.info["occupied_cells_5cm"] = evm.occupied_cells(scans, run.estimate, mount_t)
     return run, cfg
 
 
@@ -300,8 +332,6 @@ def run_world(
     heading = math.atan2(route[1, 1] - route[0, 1], route[1, 0] - route[0, 0])
     start = (float(route[0, 0]), float(route[0, 1]), heading)
     total = route_length(route)
-    stamps, est, gt, odo, kf_ms, stages = [], [], [], [], [], []
-    spent = 0.0
     with Simulation(world, cfg.sim, 1, start_poses=[start]) as sim:
         follower = PurePursuit(route, speed=speed_mps)
         slam = PolySlam(
@@ -311,54 +341,40 @@ def run_world(
             keep_trajectory=True,
             out_of_range=cfg.sim.lidar.out_of_range,
         )
-        odometry = OdometryBuffer()
         limit_s = 3.0 * total / speed_mps + 120.0  # a stuck robot must not run forever
-        while not follower.done and sim.time < limit_s:
-            for e in sim.step():
-                t0 = time.perf_counter()
-                odometry.add(sim.time, e.odom)  # a rolling sweep is de-skewed to its end
-                motion = deskew_motion(e.scan, odometry.at_many)
-                step = slam.process(e.scan, odometry.at(e.scan.end_stamp), motion)
-                spent += time.perf_counter() - t0
-                stamps.append(e.scan.end_stamp)
-                est.append(step.pose)
-                gt.append(e.true_pose)
-                odo.append(compose(start, e.odom))  # in the map frame, for the baseline
-                if step.keyframe:
-                    kf_ms.append(step.timings_ms["total"])
-                    stages.append(step.timings_ms)
-            sim.set_cmd(0, *follower.command(sim.robots[0].pose))
-            if progress:
-                progress(min(follower.progress, total), total)
+        scans = _route_scans(sim, follower, start, limit_s, total)
+        trace = run_slam(slam, scans, progress)
         collisions = sim.robots[0].wall_collisions
         sim_s = sim.time
-    final, final_map, rebuild_s = finish(slam)
-    spent += rebuild_s
-    return SlamRun(
-        world.name,
-        np.array(stamps),
-        final,
-        np.array(gt),
-        np.array(odo),
-        slam,
-        kf_ms,
-        spent,
-        sim_s,
-        True,
-        {
-            "world": world_spec,
-            "route_m": total,
-            "route_finished": bool(follower.done),
-            "wall_contacts": collisions,
-            "seed": seed,
-            "speed_mps": speed_mps,
-            "odometry_noise": config_to_dict(cfg.sim.odometry_noise),
-        },
-        world,
-        online=np.array(est),
-        final_map=final_map,
-        stage_ms=stages,
-    )
+    info = {
+        "world": world_spec,
+        "route_m": total,
+        "route_finished": bool(follower.done),
+        "wall_contacts": collisions,
+        "seed": seed,
+        "speed_mps": speed_mps,
+        "odometry_noise": config_to_dict(cfg.sim.odometry_noise),
+    }
+    return _slam_run(world.name, slam, trace, True, info, stream_s=sim_s, world=world)
+
+
+def _route_scans(sim, follower, start, limit_s: float, total_m: float):
+    """The simulated robot driven along a route: its scans, with odometry for the
+    de-skewing, ground truth, and the route's progress (metres)."""
+    odometry = OdometryBuffer()
+    while not follower.done and sim.time < limit_s:
+        for e in sim.step():
+            odometry.add(sim.time, e.odom)  # a rolling sweep is de-skewed to its end
+            yield ScanIn(
+                e.scan,
+                odometry.at(e.scan.end_stamp),
+                compose(start, e.odom),  # in the map frame, for the baseline
+                odometry.at_many,
+                truth=e.true_pose,
+                done=min(follower.progress, total_m),
+                total=total_m,
+            )
+        sim.set_cmd(0, *follower.command(sim.robots[0].pose))
 
 
 def stage_percentiles(stage_ms: list[dict[str, float]]) -> dict[str, dict[str, float]]:
