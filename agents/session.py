@@ -176,11 +176,17 @@ class Bus:
     """Typed publish/subscribe on one session, handled on the caller's thread."""
 
     def __init__(
-        self, session: zenoh.Session, sender: str, faults: LinkFaults | None = None
+        self,
+        session: zenoh.Session,
+        sender: str,
+        faults: LinkFaults | None = None,
+        inbox: queue.Queue | None = None,
     ) -> None:
+        """``inbox``: another bus's receive queue, shared (one process on several links
+        polls one of them for all)."""
         self.session = session
         self.sender = sender
-        self._queue: queue.Queue[Received] = queue.Queue(QUEUE_LIMIT)
+        self._queue: queue.Queue[Received] = queue.Queue(QUEUE_LIMIT) if inbox is None else inbox
         self._injected = iter(range(1 << 62))  # sequence numbers of injected messages
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._seq: dict[str, int] = {}
@@ -211,6 +217,10 @@ class Bus:
             )
             self._publishers[key] = pub
         return pub
+
+    @property
+    def inbox(self) -> queue.Queue:
+        return self._queue
 
     def next_seq(self, key: str) -> int:
         s = self._seq.get(key, 0)

@@ -60,6 +60,7 @@ def room_scan(t: float = 0.0):
 # them, the fast tier (`make check`) leaves them out
 WHOLE_RUNS = {
     "test_launch_e2e",
+    "test_netns",
     "test_faults",
     "test_unknown_start",
     "test_view",

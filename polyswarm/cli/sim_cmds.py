@@ -37,6 +37,11 @@ def sim_cmd(
     wait_coordinator: bool = typer.Option(
         False, help="--serve: start time only once the coordinator is up (as well as agents)."
     ),
+    robot_link: str = typer.Option(
+        "",
+        help="--serve: robots reached over links of their own, ROBOT=ENDPOINT comma separated "
+        "(e.g. r1=unixsock-stream/run/r1.sock): their sensors are on board.",
+    ),
 ) -> None:
     """Drive robots with a reactive wander controller and report what happened; with
     --serve, run the simulation for robot agents over Zenoh (robots from the config's
@@ -55,7 +60,8 @@ def sim_cmd(
     cfg = with_overrides(load_cfg(config, profile), {"sim": {"seed": seed}})
     w = load_world(world, seed=seed)
     if serve:
-        _serve(cfg, w, robots, speed, connect, zenoh_config, gui, wait_coordinator)
+        links = _robot_links(robot_link, str(zenoh_config or cfg.comms.zenoh_config or ""))
+        _serve(cfg, w, robots, speed, connect, zenoh_config, gui, wait_coordinator, links)
         return
     trails: list[list] = [[] for _ in range(robots)]
     t0 = time.perf_counter()
@@ -105,8 +111,30 @@ def plot_world(world, trajectories, path: Path) -> None:
     plt.close(fig)
 
 
+def _robot_links(text: str, zconf: str) -> dict:
+    """``r1=ENDPOINT,r2=ENDPOINT`` as each robot's client session; ConfigError when bad."""
+    from agents.session import SessionSpec
+    from polyswarm.errors import ConfigError
+
+    links = {}
+    for item in filter(None, (t.strip() for t in text.split(","))):
+        rid, sep, endpoint = item.partition("=")
+        if not sep or not rid or not endpoint:
+            raise ConfigError(f"--robot-link {item!r}: expected ROBOT=ENDPOINT")
+        links[rid] = SessionSpec.client(endpoint, zconf)
+    return links
+
+
 def _serve(
-    cfg, world, robots: int, speed, connect, zenoh_config, gui: bool, wait_coordinator: bool
+    cfg,
+    world,
+    robots: int,
+    speed,
+    connect,
+    zenoh_config,
+    gui: bool,
+    wait_coordinator: bool,
+    links: dict,
 ) -> None:
     import dataclasses
 
@@ -124,7 +152,16 @@ def _serve(
         connect or cfg.comms.endpoint, str(zenoh_config or cfg.comms.zenoh_config or "")
     )
     wait_for = ("agents", "coordinator") if wait_coordinator else ("agents",)
-    sim = serve(cfg, world, spec, stop_on_signals(), speed=speed, gui=gui, wait_for=wait_for)
+    sim = serve(
+        cfg,
+        world,
+        spec,
+        stop_on_signals(),
+        speed=speed,
+        gui=gui,
+        wait_for=wait_for,
+        robot_links=links,
+    )
     typer.echo(
         f"simulated {sim.time:.1f} s; wall contacts "
         f"{sum(r.wall_collisions for r in sim.robots)}, robot contacts "

@@ -27,6 +27,23 @@ def _pose(text: str | None):
     return (x, y, th)
 
 
+def session_spec(listen, connect, zconf: str, default: str, router: bool):
+    """The Zenoh session of ``--listen`` and ``--connect`` (comma-separated endpoints):
+    both, a router of a mesh (listening, and connecting to the other routers); listen
+    alone, a router; connect alone, a client; neither, ``default`` as a router
+    (``router``) or as the router to connect to."""
+    from agents.session import Mode, SessionSpec
+
+    def split(text):
+        return tuple(e.strip() for e in (text or "").split(",") if e.strip())
+
+    if listen:
+        return SessionSpec(Mode.ROUTER, split(listen), split(connect), zconf)
+    if connect:
+        return SessionSpec(Mode.CLIENT, (), split(connect), zconf)
+    return SessionSpec.router(default, zconf) if router else SessionSpec.client(default, zconf)
+
+
 @app.command("agent")
 def agent_cmd(
     robot_id: str = typer.Option(..., "--id", help="Robot id (a key chunk, e.g. r1)."),
@@ -53,8 +70,8 @@ def agent_cmd(
     ),
     listen: str | None = typer.Option(
         None,
-        help="Be the Zenoh router yourself, listening on this endpoint (e.g. "
-        "tcp/127.0.0.1:7447), instead of connecting to one: try an agent alone.",
+        help="Be the Zenoh router yourself, listening on these endpoints (comma separated, "
+        "e.g. tcp/127.0.0.1:7447): try an agent alone; with --connect, a router of a mesh.",
     ),
     out: Path | None = typer.Option(
         None, help="Write the agent's final map here (.polymap; .svg/.png next to it)."
@@ -66,7 +83,7 @@ def agent_cmd(
     import threading
 
     from agents.robot import run_agent
-    from agents.session import SessionSpec, stop_on_signals
+    from agents.session import stop_on_signals
     from polyswarm.config import known_starts, load_config
     from protocols.keys import SwarmKeys, check_name
 
@@ -141,10 +158,7 @@ def agent_cmd(
         else:
             pose = tuple(starts[robot_id])
     zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
-    if listen:
-        spec = SessionSpec.router(listen, zconf)
-    else:
-        spec = SessionSpec.client(connect or cfg.comms.endpoint, zconf)
+    spec = session_spec(listen, connect, zconf, cfg.comms.endpoint, router=False)
     agent = run_agent(
         robot_id,
         cfg,
@@ -214,27 +228,27 @@ def view_cmd(
 def coordinator_cmd(
     config: Path | None = CONFIG_OPT,
     listen: str | None = typer.Option(
-        None, help="Endpoint the built-in Zenoh router listens on (default: comms.endpoint)."
+        None,
+        help="Endpoints the built-in Zenoh router listens on, comma separated (default: "
+        "comms.endpoint); with --connect too, a router of a mesh.",
     ),
     zenoh_config: Path | None = typer.Option(None, help=ZENOH_HELP),
     strategy: str | None = typer.Option(None, help="hungarian, greedy or nearest."),
     connect: str | None = typer.Option(
-        None, help="Connect to this Zenoh router as a client instead of being the router."
+        None,
+        help="Connect to these Zenoh routers (comma separated): alone, as a client instead "
+        "of being the router.",
     ),
 ) -> None:
     """Run the coordinator (and the Zenoh router): merged map, frontiers, assignment."""
     from agents.coordinator_process import run_coordinator
-    from agents.session import SessionSpec
     from polyswarm.config import load_config, with_overrides
 
     cfg = load_config(config)
     if strategy is not None:
         cfg = with_overrides(cfg, {"explore": {"strategy": strategy}})
     zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
-    if connect:
-        spec = SessionSpec.client(connect, zconf)
-    else:
-        spec = SessionSpec.router(listen or cfg.comms.endpoint, zconf)
+    spec = session_spec(listen, connect, zconf, cfg.comms.endpoint, router=True)
     coord = run_coordinator(cfg, spec)
     typer.echo(
         f"coordinator: mission {coord.state}, merged map {coord.merged.explored_area():.1f} m2, "
@@ -271,7 +285,8 @@ def launch_cmd(
     fault: str = typer.Option(
         "",
         help="Inject faults: action:process@simulated-seconds, comma separated; actions "
-        "kill, stop, cont, restart (e.g. kill:r2@20,restart:r2@30).",
+        "kill, stop, cont, restart (e.g. kill:r2@20,restart:r2@30); with --netns also cut "
+        "and restore a host's link.",
     ),
     link_faults: str = typer.Option(
         "",
@@ -308,6 +323,13 @@ def launch_cmd(
         help="Place the robots at scattered random starts (seeded, 10 m apart where the world "
         "allows, random headings) and tell nobody: the coordinator finds each robot's frame by "
         "matching its map with the merged map (the first robot's start is the map's origin).",
+    ),
+    netns: bool = typer.Option(
+        False,
+        "--netns",
+        help="Each robot and the coordinator on a host of its own: a network namespace whose "
+        "only link to the others is wifi0 on one bridge; Zenoh routers in a mesh (needs root). "
+        "Cut links with --fault cut:r1@60,restore:r1@120.",
     ),
 ) -> None:
     """Explore a simulated world with N robots: coordinator, sim and agents as processes.
@@ -353,6 +375,7 @@ def launch_cmd(
         restart=restart,
         unknown_start=unknown_start,
         start_error=start_error,
+        netns=netns,
     )
     console = Console(stderr=True)
     if view_port is not None:
@@ -469,7 +492,9 @@ def fleet_config_cmd(
 
 @app.command("router")
 def router_cmd(
-    listen: str = typer.Option("tcp/127.0.0.1:7447", help="Endpoint to listen on."),
+    listen: str = typer.Option(
+        "tcp/127.0.0.1:7447", help="Endpoints to listen on (comma separated)."
+    ),
     zenoh_config: Path | None = typer.Option(None, help=ZENOH_HELP),
 ) -> None:
     """Run a bare Zenoh router (no coordinator): the others connect to it as clients.
@@ -477,10 +502,11 @@ def router_cmd(
     With its own router a fleet keeps talking while the coordinator restarts."""
     import logging
 
-    from agents.session import SessionSpec, open_session, stop_on_signals
+    from agents.session import open_session, stop_on_signals
 
     stop = stop_on_signals()
-    with open_session(SessionSpec.router(listen, str(zenoh_config or ""))):
+    spec = session_spec(listen, None, str(zenoh_config or ""), listen, router=True)
+    with open_session(spec):
         logging.getLogger("polyswarm.router").info("router listening on %s", listen)
         while not stop.wait(0.5):
             pass

@@ -46,6 +46,7 @@ from polyswarm.evaluation.coverage import coverage_tolerance, reachable_free, ti
 from polyswarm.evaluation.maps import map_iou, phantom_obstacles
 from polyswarm.frames.mapmatch import frame_error
 from polyswarm.polymap import GridPolyMap, MapDelta, VectorType
+from polyswarm.runners import netns
 from polyswarm.se2 import compose, inverse, transform_points
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta, decode_map
@@ -89,6 +90,8 @@ class FaultAction(StrEnum):
     STOP = "stop"  # SIGSTOP: frozen (a hung process)
     CONT = "cont"  # SIGCONT: wakes a frozen process
     RESTART = "restart"  # start a killed process again, same arguments
+    CUT = "cut"  # --netns: the host's wifi0 link down (out of range)
+    RESTORE = "restore"  # --netns: its wifi0 up again
 
 
 @dataclass(frozen=True)
@@ -128,6 +131,7 @@ class LaunchOptions:
     out: Path | None = None
     config: Config = field(default_factory=Config)
     verbose: bool = False
+    netns: bool = False  # each robot and the coordinator a host of its own (``netns``)
     faults: tuple[Fault, ...] = ()  # fault injection (tests of reliability)
     link_faults: str = ""  # message loss/duplication/reordering at coordinator and agents
     wrong_anchor: str = ""  # ROBOT:dx,dy,deg: its first frame committed that far off (a fault)
@@ -193,6 +197,7 @@ class Observer:
 
     def __init__(self, world, cfg: Config, ids: list[str]) -> None:
         self.world = world
+        self.outages = netns.Outages()  # links cut (launch --netns)
         # coverage counts the free space the robots' footprint can reach, less a band of
         # the lidar's noise along walls (polyswarm.evaluation.coverage.reachable_free); the map's
         # IoU is taken against all free space
@@ -362,6 +367,7 @@ class Observer:
             if isinstance(msg, RobotStatus):
                 view.state, view.target = str(msg.state), msg.target
                 view.bytes_sent, view.keyframes = msg.bytes_sent, msg.keyframes
+                self.outages.status(rid, self.sim_t, msg.keyframes)
             elif isinstance(msg, Pose) and (
                 rid not in self.own_frames or (msg.frame > 0 and not msg.own)
             ):
@@ -456,6 +462,7 @@ class Child:
     verbose: bool = False
     env: dict = field(default_factory=dict)
     nice: int = 0
+    wrap: list[str] = field(default_factory=list)  # e.g. ip netns exec NS: the host it runs on
 
 
 def _spawn(
@@ -465,10 +472,12 @@ def _spawn(
     verbose: bool,
     extra_env: dict | None = None,
     nice: int = 0,
+    wrap: list[str] | None = None,
 ) -> Child:
     log_path = logs / f"{name}.log"
     f = open(log_path, "a")  # noqa: SIM115 - kept open for the child's lifetime
-    cmd = [sys.executable, "-m", "polyswarm"] + (["-vv"] if verbose else ["-v"]) + args
+    cmd = [*(wrap or []), sys.executable, "-m", "polyswarm"]
+    cmd += (["-vv"] if verbose else ["-v"]) + args
     env = dict(os.environ, PYTHONUNBUFFERED="1", **(extra_env or {}))
     proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
     f.close()
@@ -478,7 +487,7 @@ def _spawn(
         except OSError as e:
             log.warning("could not lower the priority of %s: %s", name, e)
     _record_pid(logs, name, proc.pid)
-    return Child(name, proc, log_path, args, verbose, extra_env or {}, nice)
+    return Child(name, proc, log_path, args, verbose, extra_env or {}, nice, wrap or [])
 
 
 def _record_pid(logs: Path, name: str, pid: int) -> None:
@@ -521,8 +530,16 @@ def _process_tree(pid: int) -> list[int]:
     return out
 
 
-def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
-    """Apply one fault to the named child (a restart replaces it in ``children``)."""
+def _inject(fault: Fault, children: list[Child], logs: Path, net=None) -> None:
+    """Apply one fault to the named child (a restart replaces it in ``children``), or to
+    its host's link (``net``: ``netns.FleetNetwork``)."""
+    if fault.action in (FaultAction.CUT, FaultAction.RESTORE):
+        if net is None or fault.target not in net.hosts:
+            raise ConfigError(
+                f"fault {fault}: links are cut with --netns, on a robot or the coordinator"
+            )
+        (net.cut if fault.action == FaultAction.CUT else net.restore)(fault.target)
+        return
     k = next((i for i, c in enumerate(children) if c.name == fault.target), None)
     if k is None:
         raise ConfigError(f"fault {fault}: no process named {fault.target!r}")
@@ -532,7 +549,7 @@ def _inject(fault: Fault, children: list[Child], logs: Path) -> None:
         if c.proc.poll() is None:
             c.proc.kill()
             c.proc.wait()
-        children[k] = _spawn(c.name, c.args, logs, c.verbose, c.env, c.nice)
+        children[k] = _spawn(c.name, c.args, logs, c.verbose, c.env, c.nice, c.wrap)
     else:
         sig = {
             FaultAction.KILL: signal.SIGKILL,
@@ -649,18 +666,21 @@ def launch(
     sup = Supervision()
     t0 = time.monotonic()
     error: str | None = None
+    net = _network(opts, ids, out)
+    hosts = netns.Hosts(net, cfg.comms.endpoint)
     try:
         # a router of its own: the others keep talking while the coordinator restarts
-        children.append(_spawn("router", ["router", "--listen", cfg.comms.endpoint], logs, False))
+        children.append(_spawn("router", ["router", "--listen", hosts.root], logs, False))
         faulty = {"POLYSWARM_LINK_FAULTS": opts.link_faults} if opts.link_faults else {}
         wrong = {"POLYSWARM_WRONG_ANCHOR": opts.wrong_anchor} if opts.wrong_anchor else {}
         children.append(
             _spawn(
                 "coordinator",
-                ["coordinator", "--config", conf, "--connect", cfg.comms.endpoint],
+                ["coordinator", "--config", conf, *hosts.coordinator_args()],
                 logs,
                 opts.verbose,
                 faulty | wrong,
+                wrap=hosts.wrap("coordinator"),
             )
         )
         sim_args = [
@@ -673,13 +693,15 @@ def launch(
             "--seed",
             str(opts.seed),
         ]
-        sim_args += ["--speed", str(opts.speed), "--wait-coordinator"]
+        sim_args += ["--speed", str(opts.speed), "--wait-coordinator", *hosts.sim_args(ids)]
         sim_args += ["--gui"] if opts.gui else []
         nice = opts.robots_nice
         children.append(_spawn("sim", sim_args, logs, opts.verbose, nice=nice))
         for rid in ids:
-            agent_args = ["agent", "--id", rid, "--config", conf]
-            children.append(_spawn(rid, agent_args, logs, opts.verbose, faulty, nice))
+            agent_args = ["agent", "--id", rid, "--config", conf, *hosts.agent_args(rid)]
+            children.append(
+                _spawn(rid, agent_args, logs, opts.verbose, faulty, nice, hosts.wrap(rid))
+            )
         if opts.view_port is not None:
             view_args = ["view", "--config", conf, "--connect", cfg.comms.endpoint]
             view_args += ["--port", str(opts.view_port), "--stats", str(logs / "view.json")]
@@ -695,7 +717,7 @@ def launch(
                 bus.subscribe(keys.all_robots("pose"), Pose)
                 bus.subscribe(keys.all_robots("map/delta"), MapChunk)
                 bus.subscribe(keys.all_anchors, Anchor)
-                error = _watch(bus, keys, obs, opts, children, stop, progress, t0, sup)
+                error = _watch(bus, keys, obs, opts, children, stop, progress, t0, sup, net)
                 obs.sample_memory(children, time.monotonic() - t0)  # as the run ended
                 if error != "interrupted":
                     _final_sync(bus, keys, obs)
@@ -703,6 +725,8 @@ def launch(
                 bus.close()
     finally:
         codes, running = _stop_children(children)
+        if net is not None:
+            net.remove()
     wall = time.monotonic() - t0
     injected = {f.target for f in opts.faults if f.action == FaultAction.KILL}
     crashed = {
@@ -716,6 +740,9 @@ def launch(
     m["crashed_processes"] = sorted(crashed)
     m["restarts"] = dict(sup.restarts)  # children restarted after exiting unexpectedly
     m["stopped_because"] = error or "unknown"
+    if net is not None:
+        m["link_outages"] = obs.outages.to_list()
+        m["maps_agree"] = netns.maps_agree(Path(cfg.persist.dir), ids)
     m["config"] = config_to_dict(cfg)["explore"]
     m["profile"] = cfg.profile
     _write_outputs(out, obs, m, cfg.map.whole_map_precision_m)
@@ -740,7 +767,7 @@ def make_supervise(sup: Supervision):
             if c.name in sup.pending:
                 if now >= sup.pending[c.name]:
                     del sup.pending[c.name]
-                    children[k] = _spawn(c.name, c.args, logs, c.verbose, c.env, c.nice)
+                    children[k] = _spawn(c.name, c.args, logs, c.verbose, c.env, c.nice, c.wrap)
                     log.warning("%s restarted (restart %d)", c.name, sup.restarts[c.name])
                 continue
             code = c.proc.returncode
@@ -760,7 +787,19 @@ def make_supervise(sup: Supervision):
     return supervise
 
 
-def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0, sup) -> str:
+def _network(opts: LaunchOptions, ids: list[str], out: Path):
+    """``--netns``: the fleet's hosts in namespaces of their own (``netns``); else None."""
+    cuts = [f for f in opts.faults if f.action in (FaultAction.CUT, FaultAction.RESTORE)]
+    if not opts.netns:
+        if cuts:
+            raise ConfigError(f"fault {cuts[0]}: links are cut with --netns")
+        return None
+    run = os.urandom(2).hex()
+    (out / "logs" / "netns.json").write_text(json.dumps({"run": run, "hosts": ids}))
+    return netns.FleetNetwork.create(run, ["coordinator", *ids], out / "sockets")
+
+
+def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0, sup, net=None) -> str:
     pending = list(opts.faults)
     supervise = make_supervise(sup)
     faulted: set[str] = set()  # killed by fault injection (not a reason to stop)
@@ -795,7 +834,12 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0, sup) ->
             return "interrupted"
         while pending and obs.sim_t >= pending[0].at_s:
             fault = pending.pop(0)
-            _inject(fault, children, logs)
+            _inject(fault, children, logs, net)
+            if fault.action == FaultAction.CUT:
+                view = obs.robots.get(fault.target)
+                obs.outages.cut(fault.target, obs.sim_t, view.keyframes if view else 0)
+            elif fault.action == FaultAction.RESTORE:
+                obs.outages.restore(fault.target, obs.sim_t)
             if fault.action == FaultAction.KILL:
                 faulted.add(fault.target)
             elif fault.action == FaultAction.RESTART:

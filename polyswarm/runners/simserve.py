@@ -20,6 +20,7 @@ where they were.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -55,8 +56,12 @@ def serve(
     wait_for: tuple[str, ...] = ("agents",),
     duration_s: float = math.inf,
     gui: bool = False,
+    robot_links: dict[str, SessionSpec] | None = None,
 ) -> Simulation:
-    """Run until ``stop`` is set or ``duration_s`` simulated seconds have passed."""
+    """Run until ``stop`` is set or ``duration_s`` simulated seconds have passed.
+    ``robot_links``: a robot's own session (its sensors on board: a link of its own to
+    the robot's router, in ``launch --netns``); the others', the clock and the ground
+    truth go over ``session_spec``."""
     speed = cfg.sim.speed if speed is None else speed
     keys = SwarmKeys(cfg.comms.swarm)
     ids = [r.id for r in cfg.robots]
@@ -73,18 +78,45 @@ def serve(
         index = {rid: k for k, rid in enumerate(ids)}
         if saved is not None and saved.exists():
             resume(sim, saved)
-        with open_session(session_spec) as session:
-            bus = Bus(session, "sim")
-            try:
+        with contextlib.ExitStack() as stack:
+            bus = Bus(stack.enter_context(open_session(session_spec)), "sim")
+            stack.callback(bus.close)
+            links = _robot_buses(stack, bus, keys, robot_links or {})
+            bus.declare_alive(keys.alive("sim", "sim"))
+            if links:  # each robot over its own link; the coordinator over the main one
+                bus.watch_alive(keys.alive("coordinator", "coordinator"))
+            else:
                 bus.subscribe(keys.all_robots("cmd_vel"), CmdVel)
                 bus.watch_alive(keys.all_alive())
-                bus.declare_alive(keys.alive("sim", "sim"))
-                _loop(
-                    sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s, saved
-                )
-            finally:
-                bus.close()
+            buses = {rid: links.get(rid, bus) for rid in ids}
+            _loop(
+                sim,
+                bus,
+                buses,
+                keys,
+                ids,
+                index,
+                stop,
+                speed,
+                max_lag_s,
+                wait_for,
+                duration_s,
+                saved,
+            )
         return sim
+
+
+def _robot_buses(stack, main: Bus, keys: SwarmKeys, links: dict[str, SessionSpec]) -> dict:
+    """A bus on each robot's own link, all received into ``main``'s inbox: it hears that
+    robot's commands and liveliness only (the mesh brings the others' too, late)."""
+    out = {}
+    for rid, spec in links.items():
+        b = Bus(stack.enter_context(open_session(spec)), "sim", inbox=main.inbox)
+        stack.callback(b.close)
+        b.subscribe(keys.robot(rid).cmd_vel, CmdVel)
+        b.watch_alive(keys.alive("agent", rid))
+        out[rid] = b
+    return out
 
 
 def resume(sim: Simulation, path: Path) -> bool:
@@ -108,7 +140,7 @@ def save_state(sim: Simulation, path: Path) -> None:
 
 
 def _loop(
-    sim, bus, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s, saved=None
+    sim, bus, buses, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s, saved=None
 ) -> None:
     alive: set[tuple[str, str]] = set()
     acked = dict.fromkeys(ids, -1)  # last scan seq each agent has acknowledged
@@ -200,13 +232,14 @@ def _loop(
             rid = ids[ev.robot]
             r = sim.robots[ev.robot]
             o = ev.odom
-            bus.publish(
+            link = buses[rid]
+            link.publish(
                 keys.robot(rid).odom, Odometry(float(o[0]), float(o[1]), float(o[2]), r.v, r.w), t
             )
             # stamped with its first beam
-            bus.publish(keys.robot(rid).scan, Scan.from_laserscan(ev.scan), ev.scan.stamp)
+            link.publish(keys.robot(rid).scan, Scan.from_laserscan(ev.scan), ev.scan.stamp)
             if ("agent", rid) in alive:
-                seq = bus.last_seq(keys.robot(rid).scan)
+                seq = link.last_seq(keys.robot(rid).scan)
                 sent[rid].append((seq, t))
                 sent_wall[rid][seq] = time.monotonic()
         poses = {rid: tuple(float(v) for v in sim.robots[k].pose) for rid, k in index.items()}

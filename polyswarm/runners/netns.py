@@ -1,0 +1,266 @@
+"""A fleet on separate network stacks: one Linux network namespace per host.
+
+``polyswarm launch --netns`` runs each robot's agent and the coordinator in a namespace
+of its own (``ps-<run>-r1``, ``ps-<run>-coordinator``), as on separate computers. Each
+host's only link to the others is a veth named ``wifi0`` inside its namespace, joined to
+one bridge (the radio); cutting it (``ip link set wifi0 down``, ``cut``) is a robot
+out of range, from outside its processes. Each host's process is its own Zenoh router:
+it listens on its ``wifi0`` address and connects to the hosts before it, so the routers
+form a mesh (Zenoh's own routing), not a star through one process.
+
+The simulator stands for the robots' own sensors and the launch's observer for a
+test harness: they reach the hosts over Unix sockets (``unix_endpoint``), which no
+network namespace separates and no cut touches.
+
+    net = FleetNetwork.create("ab12", ["coordinator", "r1", "r2"], sockets_dir)
+    net.wrap("r1")          # ["ip", "netns", "exec", "ps-ab12-r1"]: prefix of its command
+    net.cut("r1"); net.restore("r1")
+    net.remove()            # namespaces, links and the bridge gone
+
+Needs root (``CAP_NET_ADMIN``) and ``ip`` from iproute2; ``NetworkError`` otherwise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import shutil
+import subprocess
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from polyswarm.errors import PolyswarmError
+
+log = logging.getLogger(__name__)
+
+PREFIX = "ps-"  # every namespace polyswarm makes starts with this
+SUBNET = "10.77.0"  # the radio's /24: private, and only ever inside our own namespaces
+PORT = 7447  # each host's router, on its wifi0 address
+IP_TIMEOUT_S = 10.0
+
+
+class NetworkError(PolyswarmError):
+    """A network namespace, link or bridge could not be made, changed or removed."""
+
+
+def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    try:
+        res = subprocess.run(
+            ["ip", *args], capture_output=True, text=True, timeout=IP_TIMEOUT_S, check=False
+        )
+    except (OSError, subprocess.TimeoutExpired) as e:
+        raise NetworkError(f"ip {' '.join(args)}: {e}") from e
+    if check and res.returncode != 0:
+        raise NetworkError(f"ip {' '.join(args)}: {res.stderr.strip() or res.returncode}")
+    return res
+
+
+def check_can_build() -> None:
+    """NetworkError (one line) unless this process may build namespaces."""
+    if shutil.which("ip") is None:
+        raise NetworkError("--netns needs the ip command (Debian package iproute2)")
+    if os.geteuid() != 0:
+        raise NetworkError("--netns needs root (it makes network namespaces, veths, a bridge)")
+
+
+def namespaces() -> list[str]:
+    """The network namespaces polyswarm made that exist now."""
+    out = _ip("netns", "list", check=False).stdout
+    return [line.split()[0] for line in out.splitlines() if line.startswith(PREFIX)]
+
+
+@dataclass
+class FleetNetwork:
+    run: str  # a short id: names are ps-<run>-<host>
+    hosts: list[str]  # in the order their addresses are given (10.77.0.1, ...)
+    sockets_dir: Path  # where the hosts' Unix sockets are
+    made: bool = False
+
+    @classmethod
+    def create(cls, run: str, hosts: list[str], sockets_dir: Path) -> FleetNetwork:
+        """Build the namespaces, the hosts' ``wifi0`` links and the bridge; on a failure
+        halfway, what was made is removed again."""
+        check_can_build()
+        if len(hosts) > 250:
+            raise NetworkError(f"{len(hosts)} hosts: the radio's /24 holds 250")
+        net = cls(run, list(hosts), Path(sockets_dir))
+        net.sockets_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            net._build()
+        except NetworkError:
+            net.remove()
+            raise
+        return net
+
+    @property
+    def bridge(self) -> str:
+        return f"psbr-{self.run}"[:15]  # interface names hold 15 characters
+
+    def namespace(self, host: str) -> str:
+        return f"{PREFIX}{self.run}-{host}"
+
+    def address(self, host: str) -> str:
+        return f"{SUBNET}.{self.hosts.index(host) + 1}"
+
+    def _peer(self, host: str) -> str:
+        return f"ps{self.run}{self.hosts.index(host)}"[:15]  # the bridge's end of wifi0
+
+    def _build(self) -> None:
+        self.made = True
+        _ip("link", "add", "name", self.bridge, "type", "bridge")
+        _ip("link", "set", self.bridge, "up")
+        for host in self.hosts:
+            ns, peer = self.namespace(host), self._peer(host)
+            _ip("netns", "add", ns)
+            _ip("link", "add", peer, "type", "veth", "peer", "name", "wifi0", "netns", ns)
+            _ip("link", "set", peer, "master", self.bridge, "up")
+            _ip("-n", ns, "link", "set", "lo", "up")
+            _ip("-n", ns, "addr", "add", f"{self.address(host)}/24", "dev", "wifi0")
+            _ip("-n", ns, "link", "set", "wifi0", "up")
+        log.info(
+            "network: %d hosts in namespaces %s*, bridge %s",
+            len(self.hosts),
+            self.namespace(""),
+            self.bridge,
+        )
+
+    def wrap(self, host: str) -> list[str]:
+        """The prefix that runs a command on ``host``."""
+        return ["ip", "netns", "exec", self.namespace(host)]
+
+    def tcp_endpoint(self, host: str) -> str:
+        return f"tcp/{self.address(host)}:{PORT}"
+
+    def unix_endpoint(self, host: str) -> str:
+        return f"unixsock-stream/{self.sockets_dir.resolve() / f'{host}.sock'}"
+
+    def listen(self, host: str) -> list[str]:
+        """Where ``host``'s router listens: its radio, and its Unix socket."""
+        return [self.tcp_endpoint(host), self.unix_endpoint(host)]
+
+    def mesh(self, host: str) -> list[str]:
+        """The routers ``host`` connects to: every host before it (one link per pair)."""
+        return [self.tcp_endpoint(h) for h in self.hosts[: self.hosts.index(host)]]
+
+    def cut(self, host: str) -> None:
+        """``host`` out of range: its wifi0 down."""
+        _ip("-n", self.namespace(host), "link", "set", "wifi0", "down")
+        log.warning("network: %s cut off (wifi0 down)", host)
+
+    def restore(self, host: str) -> None:
+        _ip("-n", self.namespace(host), "link", "set", "wifi0", "up")
+        log.warning("network: %s back in range (wifi0 up)", host)
+
+    def remove(self) -> None:
+        """Namespaces (and with them the veths) and the bridge removed; what is already
+        gone is skipped. Sockets are left to the run folder."""
+        if not self.made:
+            return
+        for host in self.hosts:
+            _ip("netns", "del", self.namespace(host), check=False)
+        _ip("link", "del", self.bridge, check=False)
+        self.made = False
+        left = [n for n in namespaces() if n.startswith(self.namespace(""))]
+        if left:
+            raise NetworkError(f"namespaces left behind: {', '.join(left)}")
+
+
+@dataclass(frozen=True)
+class Hosts:
+    """Where each process of a launch runs and how it reaches Zenoh: with a network
+    (``--netns``) each host's process is a router of the mesh, the coordinator's also
+    linked to the launch's own router (the observer's), the simulator to each robot over
+    its Unix socket; without one, everyone is a client of the launch's router."""
+
+    net: FleetNetwork | None
+    endpoint: str  # the launch's router, for the observer, the view and the simulator
+
+    @property
+    def root(self) -> str:
+        """Where the launch's router listens."""
+        if self.net is None:
+            return self.endpoint
+        return f"{self.endpoint},{self.net.unix_endpoint('launch')}"
+
+    def wrap(self, host: str) -> list[str]:
+        return [] if self.net is None else self.net.wrap(host)
+
+    def coordinator_args(self) -> list[str]:
+        if self.net is None:
+            return ["--connect", self.endpoint]
+        listen = ",".join(self.net.listen("coordinator"))
+        return ["--listen", listen, "--connect", self.net.unix_endpoint("launch")]
+
+    def agent_args(self, rid: str) -> list[str]:
+        if self.net is None:
+            return []
+        return [
+            "--listen",
+            ",".join(self.net.listen(rid)),
+            "--connect",
+            ",".join(self.net.mesh(rid)),
+        ]
+
+    def sim_args(self, ids: list[str]) -> list[str]:
+        if self.net is None:
+            return []
+        return ["--robot-link", ",".join(f"{r}={self.net.unix_endpoint(r)}" for r in ids)]
+
+
+@dataclass
+class Outage:
+    robot: str
+    cut_s: float  # simulated seconds
+    keyframes_at_cut: int  # the last its status told before the cut
+    restore_s: float | None = None
+    rejoined_s: float | None = None  # its first status heard after the restore
+    keyframes_at_rejoin: int | None = None
+
+
+@dataclass
+class Outages:
+    """The links a launch cut, and what the robots did meanwhile: the keyframes a robot
+    made while out of range are the map it kept building on its own."""
+
+    items: list[Outage] = field(default_factory=list)
+
+    def cut(self, robot: str, t_s: float, keyframes: int) -> None:
+        self.items.append(Outage(robot, t_s, keyframes))
+
+    def restore(self, robot: str, t_s: float) -> None:
+        for o in self.items:
+            if o.robot == robot and o.restore_s is None:
+                o.restore_s = t_s
+
+    def status(self, robot: str, t_s: float, keyframes: int) -> None:
+        for o in self.items:
+            if o.robot == robot and o.restore_s is not None and o.rejoined_s is None:
+                o.rejoined_s, o.keyframes_at_rejoin = t_s, keyframes
+
+    def to_list(self) -> list[dict]:
+        return [dataclasses.asdict(o) for o in self.items]
+
+
+def maps_agree(state_dir: Path, ids: list[str]) -> dict[str, dict]:
+    """After a run: each robot's own saved map against the coordinator's saved copy of
+    it (same version and explored area: nothing it mapped is missing there)."""
+    from agents.persist import load_agent, load_coordinator
+
+    _, copies = load_coordinator(state_dir)
+    out = {}
+    for rid in ids:
+        own = load_agent(state_dir, rid)
+        copy = copies.get(rid)
+        if own is None or copy is None:
+            out[rid] = {"agree": False, "why": "no saved map" if own is None else "no copy"}
+            continue
+        a, b = own.map.explored_area(), copy.explored_area()
+        out[rid] = {
+            "agree": own.map.version == copy.version and abs(a - b) < 1e-6,
+            "version": own.map.version,
+            "copy_version": copy.version,
+            "explored_m2": round(a, 3),
+            "copy_explored_m2": round(b, 3),
+        }
+    return out
