@@ -25,10 +25,18 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from agents import persist
+from agents.alone import Alone
 from agents.behaviour import Behaviour
 from agents.seen import SeenObstacles
 from polyswarm.config import Config, SensorSource, known_starts
-from polyswarm.errors import DecodeError, DeltaGapError, MapError, PolyswarmError
+from polyswarm.errors import (
+    DecodeError,
+    DeltaGapError,
+    MapError,
+    PlanningError,
+    PolyswarmError,
+)
+from polyswarm.explore.targets import Sensor
 from polyswarm.frames.sighting import PROFILE_PERIOD_S, clear_profile
 from polyswarm.nav.control import ControlParams, PathFollower
 from polyswarm.nav.navgraph import NavGraph, clear_of
@@ -96,6 +104,7 @@ class Outbox:
     op: MergeOp | None = None  # the delta as the merge that made it (often smaller)
     correction: CorrectionOp | None = None  # keyframes a loop closure moved, before ``op``
     status: RobotStatus | None = None
+    assignment: Assignment | None = None  # one the robot gave itself (``agents.alone``)
 
 
 @dataclass
@@ -159,6 +168,7 @@ class RobotAgent:
         self._mount_said = False  # the lidar mount's source was logged
         self.seen = SeenObstacles()  # obstacles the lidar sees and the planning map lacks
         self.recent = RecentReturns()  # the last seconds' close returns, for the controller
+        self.alone = Alone()  # out of every coordinator's reach: targets of its own
         self._now_s = 0.0
         self.merged_graph: NavGraph | None = None
         self.own_graph: NavGraph | None = None
@@ -223,8 +233,9 @@ class RobotAgent:
 
     @property
     def planning_map(self) -> GridPolyMap:
-        """The map the robot plans on: the merged map once the coordinator shares one."""
-        return self.merged if self.merged is not None else self.slam.map
+        """The map the robot plans on: the merged map once the coordinator shares one
+        (its own while it is alone)."""
+        return self._planning_map()[0]
 
     @property
     def target_xy(self) -> tuple[float, float] | None:
@@ -351,6 +362,7 @@ class RobotAgent:
         xy = pts.xy[pts.valid]
         world = transform_points(self.pose, xy)
         self._remember_unmapped(stamp_s, world)
+        out.assignment = self._own_target(stamp_s)
         obstacles, moving = self._obstacles(stamp_s, odom, xy, world)
         out.cmd = self.behaviour.step(stamp_s, self.pose, obstacles, moving, turned)
         self.follower.sent(*out.cmd)  # arcs start from what the base does
@@ -436,6 +448,38 @@ class RobotAgent:
         self.seen.forget_seen_through(world, self.pose[:2])
         keep = ~self._near_peers(world, stamp_s)
         self.seen.add(stamp_s, world[keep], self.pose[:2], pmap)
+
+    def on_coordinator_alive(self, name: str, alive: bool) -> None:
+        self.alone.coordinator(name, alive, self._now_s)
+
+    def _own_target(self, now_s: float) -> Assignment | None:
+        """Alone with nothing to do: a frontier of its own map (``agents.alone``)."""
+        if not self.alone.wants_target(now_s, self.state, self.assignment):
+            return None
+        if not self.alone.due(now_s):
+            return None
+        own, graph = self._planning_map()
+
+        def plan(goal):
+            try:
+                return self.plan(self.pose[:2], goal, partial=False)
+            except PlanningError:
+                return None
+
+        peers = [xy for _, xy in self.peers.values()]
+        a = self.alone.choose(
+            own,
+            graph,
+            self.merged,
+            Sensor.of(self.cfg.sim.lidar),
+            self.pose[:2],
+            peers,
+            plan,
+            self.assignment,
+        )
+        if a is not None:
+            self.behaviour.on_assignment(a, now_s, self.pose)
+        return a
 
     def _obstacles(self, stamp_s: float, odom, xy: np.ndarray, world: np.ndarray):
         """What the controller keeps clear of, (n, 2) in the robot frame, and which of it
@@ -537,7 +581,10 @@ class RobotAgent:
         self.slam.request_keyframe()  # what it sees now goes into the map
 
     def _planning_map(self) -> tuple[GridPolyMap, NavGraph]:
-        if self.merged is not None and self.merged_graph is not None:
+        """The merged map; the robot's own before it has one, or while it is alone (the
+        merged map stops growing then)."""
+        alone = self.alone.active(self._now_s)
+        if self.merged is not None and self.merged_graph is not None and not alone:
             return self.merged, self.merged_graph
         own = self.slam.map
         if self.own_graph is None or self._own_graph_version != own.version:
@@ -652,6 +699,9 @@ def run_agent(
                     alive = is_alive_change(item)
                     if alive is not None:
                         need_merged |= alive
+                        who = keys.alive_name(item.key)
+                        if who is not None and who[0] == "coordinator":
+                            agent.on_coordinator_alive(who[1], alive)
                         continue
                     msg = item.msg
                     try:
@@ -791,6 +841,8 @@ def _send(
         for what, base, ver, payload in encode_updates(out.delta, out.op, out.correction, wire):
             kind = MAP_KIND_OF[what]
             sent += bus.publish_map(me.map_delta, kind, payload, base, ver, stamp_s)
+    if out.assignment is not None:
+        sink.assignment(out.assignment, stamp_s)
     if out.pose is not None:
         sent += bus.publish(me.pose, out.pose, stamp_s)
     if out.status is not None:

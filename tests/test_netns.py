@@ -82,8 +82,9 @@ def test_cutting_a_link_without_netns_is_a_one_line_error(tmp_path):
 def test_robots_cut_off_keep_mapping_and_their_maps_agree_with_the_coordinators_after(tmp_path):
     """Three robots on the office, each agent and the coordinator in a namespace of its
     own; r1 out of range from 30 to 90 simulated seconds, r2 from 50 to 110. Measured:
-    100 % coverage at t99 140 s, r1 15 and r2 10 keyframes made while cut, every map
-    the coordinator holds the same version as the robot's own at the end."""
+    100 % coverage at t99 134 s; exploring frontiers of their own maps while cut, r1
+    made 65 and r2 59 keyframes (15 and 10 when they stood at their last target); every
+    map the coordinator holds the same version as the robot's own at the end."""
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "3", "--world", "office"]
     cmd += ["--speed", "0", "--wall-limit", "400", "--netns", "--out", str(out)]
