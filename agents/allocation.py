@@ -332,6 +332,31 @@ class TargetAllocation:
         self._wake = True
         return True
 
+    def adopt(self, assignments: dict, max_target: int) -> None:
+        """Take the fleet over from another coordinator (``agents.leadership``): its last
+        ``assignments`` (robot -> Assignment) become this one's, so that no robot loses
+        its target and none is given twice; this one's targets near them take their ids,
+        the others new ids above every id heard (``max_target``)."""
+        start = max(self._next_id, max_target + 1)
+        self.targets = {start + k: t for k, t in enumerate(self.targets.values())}
+        self._next_id = start + len(self.targets)
+        for r in self.robots.values():
+            r.assignment = None
+        for rid, a in assignments.items():
+            r = self.robot(rid)
+            r.assignment, r.sent_t = a, -math.inf  # sent again at once, by the new leader
+            r.best_cost, r.progress_t, r.reached_t = math.inf, self.now, None
+            if a.kind != AssignmentKind.EXPLORE:
+                continue
+            near = [
+                tid
+                for tid, t in self.targets.items()
+                if tid >= start and np.hypot(*(t.goal - np.array(a.goal))) < MATCH_M
+            ]
+            if near:
+                self.targets[a.target] = self.targets.pop(near[0])
+        self._wake = True
+
     def new_target_id(self) -> int:
         """A target id not used before in this mission."""
         self._next_id += 1

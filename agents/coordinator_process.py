@@ -6,13 +6,17 @@ cycle decides; the helpers below turn messages into calls of the coordinator."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
+import time
+from pathlib import Path
 
 import numpy as np
 
 from agents import persist
 from agents.coordinator import DRAIN_TIMEOUT_S, Coordinator
+from agents.leadership import Leadership
 from agents.merger import MergeProcess
 from agents.replay import ReplayPool
 from polyswarm.config import Config, known_starts
@@ -25,6 +29,8 @@ from protocols.mapcodec import (
     encode_map,
 )
 from protocols.messages import (
+    Assignment,
+    CoordinatorStatus,
     MapChunk,
     MapKind,
     Pose,
@@ -34,8 +40,16 @@ from protocols.messages import (
 log = logging.getLogger(__name__)
 
 
-def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = None) -> Coordinator:
-    """Run the coordinator until ``stop`` is set (or SIGINT/SIGTERM)."""
+def run_coordinator(
+    cfg: Config,
+    session_spec,
+    stop: threading.Event | None = None,
+    name: str = "coordinator",
+    standby: bool = False,
+) -> Coordinator:
+    """Run the coordinator until ``stop`` is set (or SIGINT/SIGTERM). ``standby``: start
+    silent, and take over when the active one is gone (``agents.leadership``); a
+    coordinator other than ``coordinator`` keeps its state in a folder of its name."""
     from agents.anchoring import Anchoring
     from agents.joint import JointCorrections
     from agents.session import Bus, is_alive_change, open_session, stop_on_signals
@@ -49,6 +63,8 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
     anchoring = Anchoring(cfg, [rid for rid, st in starts.items() if st is None])
     joint = JointCorrections() if cfg.explore.joint_graph else None
     state_dir = cfg.persist.dir
+    if state_dir and name != "coordinator":
+        state_dir = str(Path(state_dir) / name)
     journal = persist.CoordinatorJournal(state_dir) if state_dir else None
     if state_dir:
         merged, robot_maps = persist.load_coordinator(state_dir)
@@ -61,8 +77,10 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 len(robot_maps),
                 state_dir,
             )
+    lead = Leadership(name, active=not standby, since=time.monotonic())
     with open_session(session_spec) as session:
-        bus = Bus(session, "coordinator")
+        bus = Bus(session, name)
+        out = Gate(bus, lead)  # what only the active coordinator sends
         pool = merger = None
         try:
             if cfg.explore.replay_workers:
@@ -76,10 +94,19 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
             precision_m = cfg.map.whole_map_precision_m  # a whole map goes at 1 mm
             bus.serve_map(
                 keys.merged_map,
-                lambda: (encode_map(coord.merged, precision_m), coord.merged.version),
+                lambda: (
+                    (encode_map(coord.merged, precision_m), coord.merged.version)
+                    if lead.active
+                    else None
+                ),
             )
-            bus.declare_alive(keys.alive("coordinator", "coordinator"))
+            bus.subscribe(keys.coordinator_status, CoordinatorStatus)
+            bus.subscribe(keys.all_assignments, Assignment)
+            token = bus.declare_alive(keys.alive(_role(lead), name))
             bus.watch_alive(keys.all_alive("agent"))
+            bus.watch_alive(keys.all_alive("coordinator"))
+            bus.watch_alive(keys.all_alive("standby"))
+            peers: set[str] = set()  # coordinators alive, active or standing by
             resync: set[str] = set()
             log.info("coordinator up: robots %s, strategy %s", list(robots), coord.strategy)
             while not stop.is_set():
@@ -88,8 +115,13 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                     try:
                         if alive is not None:
                             who = keys.alive_name(item.key)
-                            if who is not None:
+                            if who is not None and who[0] in ("coordinator", "standby"):
+                                (peers.add if alive else peers.discard)(who[1])
+                            elif who is not None:
                                 anchoring.owner(who[1], coord).on_alive(who[1], alive)
+                            continue
+                        if _leader_message(lead, keys, item):
+                            token = _swap_role(bus, keys, lead, token)
                             continue
                         rid = keys.robot_of(item.key)
                         if rid is None:
@@ -120,6 +152,10 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         log.warning("rejected %s: %s", item.key, e)
                     except PolyswarmError as e:
                         log.warning("%s: %s", item.key, e)
+                if lead.due(time.monotonic(), peers):
+                    lead.take_over(time.monotonic())
+                    coord.adopt(lead.assignments, lead.max_target)
+                    token = _swap_role(bus, keys, lead, token)
                 for rid, got in coord.take_in():  # replayed and journaled on the pool
                     if isinstance(got, MapError):
                         _resync(coord, rid, got, resync)
@@ -154,7 +190,7 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                         solo.flush()
                     if solo.due():
                         for rid, a in solo.cycle().assignments.items():
-                            solo.bytes_sent += bus.publish(
+                            solo.bytes_sent += out.publish(
                                 keys.assignment(rid), a, solo.now, reliable=True
                             )
                 coord.frames_pending = tuple(anchoring.waiting)
@@ -162,24 +198,25 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                 for rid, anchor in anchoring.tick(coord, now):
                     if anchor.own and coord.pool is None:  # withdrawn: journaled aside
                         persist.record(journal, "robot_withdrawn", rid)
-                    coord.bytes_sent += bus.publish(keys.anchor(rid), anchor, now, reliable=True)
+                    coord.bytes_sent += out.publish(keys.anchor(rid), anchor, now, reliable=True)
                 for rid, priors in joint.tick(coord, now, set(anchoring.audits)) if joint else []:
-                    coord.bytes_sent += bus.publish(keys.priors(rid), priors, now, reliable=True)
+                    coord.bytes_sent += out.publish(keys.priors(rid), priors, now, reliable=True)
                 if coord.flush_due():
                     delta = coord.flush()
                     with coord.timed("publish"):
-                        _publish_delta(bus, keys, coord, delta, journal)
+                        _publish_delta(out, keys, coord, delta, journal)
                 if coord.due():
-                    out = coord.cycle()
+                    res = coord.cycle()
                     with coord.timed("publish"):  # counted into the next cycle
-                        _publish_delta(bus, keys, coord, out.merged_delta, journal)
-                        for rid, a in out.assignments.items():
-                            coord.bytes_sent += bus.publish(
+                        _publish_delta(out, keys, coord, res.merged_delta, journal)
+                        for rid, a in res.assignments.items():
+                            coord.bytes_sent += out.publish(
                                 keys.assignment(rid), a, coord.now, reliable=True
                             )
-                    if out.status is not None:
-                        coord.bytes_sent += bus.publish(
-                            keys.coordinator_status, out.status, coord.now, reliable=True
+                    if res.status is not None:
+                        status = dataclasses.replace(res.status, leader=name, term=lead.term)
+                        coord.bytes_sent += out.publish(
+                            keys.coordinator_status, status, coord.now, reliable=True
                         )
         finally:
             anchoring.close()
@@ -224,6 +261,40 @@ def run_coordinator(cfg: Config, session_spec, stop: threading.Event | None = No
                     r.sum() / 1e3,
                 )
     return coord
+
+
+class Gate:
+    """The bus's sending side, open only while this coordinator is the active one."""
+
+    def __init__(self, bus, lead: Leadership) -> None:
+        self.bus, self.lead = bus, lead
+
+    def publish(self, *args, **kw) -> int:
+        return self.bus.publish(*args, **kw) if self.lead.active else 0
+
+    def publish_map(self, *args, **kw) -> int:
+        return self.bus.publish_map(*args, **kw) if self.lead.active else 0
+
+
+def _role(lead: Leadership) -> str:
+    return "coordinator" if lead.active else "standby"
+
+
+def _swap_role(bus, keys: SwarmKeys, lead: Leadership, token):
+    """The liveliness token of this coordinator's role now (robots count only actives)."""
+    bus.undeclare(token)
+    return bus.declare_alive(keys.alive(_role(lead), lead.name))
+
+
+def _leader_message(lead: Leadership, keys: SwarmKeys, item) -> bool:
+    """Another coordinator's status or assignment: heard by the election; True when
+    this coordinator just stepped down."""
+    msg = item.msg
+    if isinstance(msg, CoordinatorStatus):
+        return lead.heard_status(msg, time.monotonic())
+    if isinstance(msg, Assignment) and item.sender != lead.name:
+        lead.heard_assignment(item.key.rsplit("/", 1)[-1], msg)
+    return False
 
 
 def _robot_message(c: Coordinator, rid: str, item, resync: set) -> None:

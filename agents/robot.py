@@ -27,6 +27,7 @@ import numpy as np
 from agents import persist
 from agents.alone import Alone
 from agents.behaviour import Behaviour
+from agents.leadership import Following
 from agents.seen import SeenObstacles
 from polyswarm.config import Config, SensorSource, known_starts
 from polyswarm.errors import (
@@ -689,6 +690,7 @@ def run_agent(
             )
             detach = attach(session, agent, stop) if attach is not None else None
             waiting: list = []  # (wall time, scan item) waiting for odometry
+            leader = Following()  # the coordinator it takes assignments from
             need_merged = False
             behind_since = None  # the merged map we hold is older than the coordinator's
             while not stop.is_set() and time.monotonic() < t_end:
@@ -722,8 +724,9 @@ def run_agent(
                             if rid is not None:
                                 agent.on_peer_pose(rid, item.stamp_s, msg)
                         elif isinstance(msg, Assignment):
-                            agent.on_assignment(msg, item.stamp_s)
-                            sink.assignment(agent.assignment, item.stamp_s)
+                            if leader.admits(item.sender, msg):
+                                agent.on_assignment(msg, item.stamp_s)
+                                sink.assignment(agent.assignment, item.stamp_s)
                         elif isinstance(msg, Anchor):
                             agent.on_anchor(msg)
                             need_merged = True
@@ -735,6 +738,12 @@ def run_agent(
                             except MapError:  # a gap (or no map yet): resync
                                 need_merged = True
                         elif isinstance(msg, CoordinatorStatus):
+                            held = leader.heard(msg)
+                            if held is not None:  # a new leader: its map, its last order
+                                need_merged = True
+                                if held.assignment is not None:
+                                    agent.on_assignment(held.assignment, item.stamp_s)
+                                    sink.assignment(agent.assignment, item.stamp_s)
                             have = -1 if agent.merged is None else agent.merged.version
                             behind = msg.map_version > have
                             behind_since = (behind_since or time.monotonic()) if behind else None

@@ -255,11 +255,15 @@ class Bus:
         self, key: str, current: Callable[[], tuple[bytes, int]], kind: MapKind = MapKind.MAP
     ) -> None:
         """Answer queries on ``key`` with the full map ``current()`` = (payload, version):
-        a ``polymap`` (``kind`` MAP) or all its cells (DELTA from version -1)."""
+        a ``polymap`` (``kind`` MAP) or all its cells (DELTA from version -1); no answer
+        while ``current()`` is None."""
 
         def on_query(query: zenoh.Query) -> None:
             try:
-                payload, ver = current()
+                got = current()
+                if got is None:
+                    return
+                payload, ver = got
                 for c in self.map_chunks(kind, payload, -1, ver):
                     data = encode(c, self.sender, self.next_seq(key), time.time())
                     query.reply(query.key_expr, data)
@@ -401,8 +405,16 @@ class Bus:
             self.session.liveliness().declare_subscriber(key, on_sample, history=True)
         )
 
-    def declare_alive(self, key: str) -> None:
-        self._handles.append(self.session.liveliness().declare_token(key))
+    def declare_alive(self, key: str):
+        """A liveliness token on ``key``, alive until ``undeclare`` or the bus closes."""
+        token = self.session.liveliness().declare_token(key)
+        self._handles.append(token)
+        return token
+
+    def undeclare(self, handle) -> None:
+        if handle in self._handles:
+            self._handles.remove(handle)
+            handle.undeclare()
 
     def _put(self, item: Received) -> None:
         try:

@@ -89,6 +89,10 @@ class SwarmKeys:
     def assignment(self, robot_id: str) -> str:
         return f"{self.prefix}/coordinator/assignment/{check_name(robot_id, 'robot id')}"
 
+    @property
+    def all_assignments(self) -> str:
+        return f"{self.prefix}/coordinator/assignment/*"
+
     def anchor(self, robot_id: str) -> str:
         return f"{self.prefix}/coordinator/anchor/{check_name(robot_id, 'robot id')}"
 

@@ -523,6 +523,9 @@ class CoordinatorStatus(Message):
     gaps: int = 0
     fetches: int = 0
     fetch_bytes: int = 0
+    # the active coordinator's name and term (standby coordinators: ``agents.leadership``)
+    leader: str = ""
+    term: int = 0
 
     def body(self) -> dict:
         out = {
@@ -541,6 +544,8 @@ class CoordinatorStatus(Message):
             out["banned"] = [list(p) for p in self.blacklisted]
         if self.gaps or self.fetches:  # absent when none (and in older senders' messages)
             out["losses"] = [self.gaps, self.fetches, self.fetch_bytes]
+        if self.leader:  # absent from a coordinator without standbys' election
+            out["leader"] = [self.leader, self.term]
         return out
 
     @classmethod
@@ -554,6 +559,14 @@ class CoordinatorStatus(Message):
         losses = b.get("losses", [0, 0, 0])
         if not isinstance(losses, list) or len(losses) != 3:
             raise ProtocolError("field 'losses': expected [gaps, fetches, fetch bytes]")
+        leader = b.get("leader", ["", 0])
+        if (
+            not isinstance(leader, list)
+            or len(leader) != 2
+            or not isinstance(leader[0], str)
+            or (leader[0] and not NAME_RE.match(leader[0]))
+        ):
+            raise ProtocolError("field 'leader': expected [name, term]")
         return cls(
             _str(b.get("state"), "state", MissionState),
             tuple(robots),
@@ -566,6 +579,8 @@ class CoordinatorStatus(Message):
             _points(b.get("goals", ()), "goals", MAX_STATUS_POINTS),
             _points(b.get("banned", ()), "banned", MAX_STATUS_POINTS),
             *(_int(v, f"losses[{k}]", 0) for k, v in enumerate(losses)),
+            leader[0],
+            _int(leader[1], "leader[1]", 0),
         )
 
 

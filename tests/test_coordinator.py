@@ -543,3 +543,23 @@ def test_a_cycle_counts_all_the_work_done_in_the_coordinators_thread_since_the_l
     assert c.cycle_ms[-1] == pytest.approx(
         sum(c.stage_ms[k] - before.get(k, 0.0) for k in c.stage_ms), rel=1e-9
     )
+
+
+def test_a_coordinator_taking_over_keeps_each_robots_target_and_gives_none_twice():
+    """The standby (this coordinator, its own target ids) adopts the active one's last
+    assignments: the same frontier keeps the active's id, the robot is not re-sent
+    elsewhere, and new targets get ids above every id heard (agents.leadership)."""
+    c = coordinator(2)
+    feed(c, "r1", corridor_map(open_end=True), 0.1)
+    c.now = 1.0
+    c.cycle()
+    mine = c.robots["r2"].assignment  # what this one would have sent
+    heard = Assignment(AssignmentKind.EXPLORE, 900, mine.goal, mine.frontier)
+    c.adopt({"r2": heard}, max_target=950)
+    assert c.robots["r2"].assignment == heard and c.robots["r1"].assignment is None
+    assert 900 in c.targets and all(t == 900 or t > 950 for t in c.targets)
+    c.now = 2.0
+    out = c.cycle()
+    assert out.assignments["r2"].target == 900  # sent again at once by the new leader
+    assert "r1" not in out.assignments or out.assignments["r1"].target != 900
+    assert c.new_target_id() > 950

@@ -103,6 +103,23 @@ def test_robots_cut_off_keep_mapping_and_their_maps_agree_with_the_coordinators_
     assert all(v["agree"] for v in m["maps_agree"].values()), m["maps_agree"]
 
 
+def test_a_standby_takes_over_when_the_active_coordinators_host_is_lost(tmp_path):
+    """Two coordinators on hosts of their own; at 40 simulated seconds the active one's
+    host is gone (its processes killed, its link down). Measured: coordinator2 took
+    over 5.7 s later (wall), the robots followed it and the mission ended at 100 %."""
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "3", "--world", "office"]
+    cmd += ["--speed", "0", "--wall-limit", "400", "--netns", "--coordinators", "2"]
+    cmd += ["--fault", "kill:coordinator@40,cut:coordinator@40", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=500, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["mission_state"] == "done" and m["final_coverage"] >= 0.99, m["stopped_because"]
+    assert [(t, n) for t, n, *_ in m["leaders"]] == [(0, "coordinator"), (1, "coordinator2")]
+    assert len(m["takeover_s"]) == 1 and m["takeover_s"][0] <= 10.0, m["takeover_s"]
+    assert m["crashed_processes"] == []
+
+
 def test_ctrl_c_removes_the_network(tmp_path):
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "2", "--world", "office"]

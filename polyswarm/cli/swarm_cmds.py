@@ -239,6 +239,14 @@ def coordinator_cmd(
         help="Connect to these Zenoh routers (comma separated): alone, as a client instead "
         "of being the router.",
     ),
+    name: str = typer.Option(
+        "coordinator", help="This coordinator's name (a key chunk); others keep state apart."
+    ),
+    standby: bool = typer.Option(
+        False,
+        "--standby",
+        help="Start silent and take over when no active coordinator has been heard for 6 s.",
+    ),
 ) -> None:
     """Run the coordinator (and the Zenoh router): merged map, frontiers, assignment."""
     from agents.coordinator_process import run_coordinator
@@ -249,7 +257,7 @@ def coordinator_cmd(
         cfg = with_overrides(cfg, {"explore": {"strategy": strategy}})
     zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
     spec = session_spec(listen, connect, zconf, cfg.comms.endpoint, router=True)
-    coord = run_coordinator(cfg, spec)
+    coord = run_coordinator(cfg, spec, name=name, standby=standby)
     typer.echo(
         f"coordinator: mission {coord.state}, merged map {coord.merged.explored_area():.1f} m2, "
         f"{coord.bytes_sent} bytes sent",
@@ -331,6 +339,13 @@ def launch_cmd(
         "only link to the others is wifi0 on one bridge; Zenoh routers in a mesh (needs root). "
         "Cut links with --fault cut:r1@60,restore:r1@120.",
     ),
+    coordinators: int = typer.Option(
+        1,
+        min=1,
+        max=9,
+        help="Coordinators: the first active, the others (coordinator2, ...) standing by to "
+        "take over when it is gone (e.g. --fault kill:coordinator@60,cut:coordinator@60).",
+    ),
 ) -> None:
     """Explore a simulated world with N robots: coordinator, sim and agents as processes.
 
@@ -376,6 +391,7 @@ def launch_cmd(
         unknown_start=unknown_start,
         start_error=start_error,
         netns=netns,
+        coordinators=coordinators,
     )
     console = Console(stderr=True)
     if view_port is not None:

@@ -32,6 +32,7 @@ import numpy as np
 import shapely
 import shapely.affinity
 
+from agents.leadership import wins
 from agents.session import Bus, SessionSpec, open_session
 from polyswarm.config import (
     Config,
@@ -66,7 +67,8 @@ log = logging.getLogger(__name__)
 STACK_DUMP_S = 0.2  # a child that did not stop gets this long to write its stack
 SHUTDOWN_S = 4.0  # children get this long to exit after SIGTERM before SIGKILL
 VIEW = "view"  # the live view: its exit does not end the mission
-HUB = ("coordinator", "router")  # stopped last, so they receive what the robots sent last
+# stopped last, so that they receive what the robots sent last
+HUB = ("coordinator", "router", *(f"coordinator{k}" for k in range(2, 10)))
 HUB_SHUTDOWN_S = 1.5  # ... and given this much of SHUTDOWN_S (writing the coordinator's
 #                       state is appending to its journal, not rewriting maps)
 RSS_EVERY_S = 5.0  # wall seconds between memory samples of every process
@@ -132,6 +134,7 @@ class LaunchOptions:
     config: Config = field(default_factory=Config)
     verbose: bool = False
     netns: bool = False  # each robot and the coordinator a host of its own (``netns``)
+    coordinators: int = 1  # the first active, the others standing by (``agents.leadership``)
     faults: tuple[Fault, ...] = ()  # fault injection (tests of reliability)
     link_faults: str = ""  # message loss/duplication/reordering at coordinator and agents
     wrong_anchor: str = ""  # ROBOT:dx,dy,deg: its first frame committed that far off (a fault)
@@ -198,6 +201,8 @@ class Observer:
     def __init__(self, world, cfg: Config, ids: list[str]) -> None:
         self.world = world
         self.outages = netns.Outages()  # links cut (launch --netns)
+        self.leaders: list[list] = []  # [term, name, sim s, wall s] as the leader changed
+        self.coordinator_lost: list[float] = []  # wall s: active coordinators killed
         # coverage counts the free space the robots' footprint can reach, less a band of
         # the lidar's noise along walls (polyswarm.evaluation.coverage.reachable_free); the map's
         # IoU is taken against all free space
@@ -328,6 +333,20 @@ class Observer:
         if not self.coverage or self.sim_t - self.coverage[-1][0] >= COVERAGE_EVERY_S:
             self.coverage.append((self.sim_t, self.coverage_now()))
 
+    def _leader(self, msg: CoordinatorStatus) -> bool:
+        """Whether ``msg`` comes from the leader (``agents.leadership.wins``); a new one
+        is recorded, and its merged map fetched whole."""
+        if not msg.leader:
+            return True
+        now = (msg.term, msg.leader)
+        last = tuple(self.leaders[-1][:2]) if self.leaders else None
+        if last is not None and last != now and not wins(now, last):
+            return False
+        if not self.leaders or self.leaders[-1][:2] != list(now):
+            self.leaders.append([*now, round(self.sim_t, 2), round(time.monotonic(), 3)])
+            self.need_resync = self.need_resync or len(self.leaders) > 1
+        return True
+
     def handle(self, keys: SwarmKeys, item) -> None:
         msg = item.msg
         rid = keys.robot_of(item.key)
@@ -348,6 +367,8 @@ class Observer:
                     )
                 view.truth.append((item.stamp_s, *p))
         elif isinstance(msg, CoordinatorStatus):
+            if not self._leader(msg):
+                return  # a coordinator that lost the election, until it steps down
             self.coordinator = msg
             self.mission = msg.state
             now = np.array([msg.gaps, msg.fetches, msg.fetch_bytes], dtype=np.int64)
@@ -683,6 +704,10 @@ def launch(
                 wrap=hosts.wrap("coordinator"),
             )
         )
+        for name in _standbys(opts):
+            args = ["coordinator", "--config", conf, "--name", name, "--standby"]
+            args += hosts.coordinator_args(name)
+            children.append(_spawn(name, args, logs, opts.verbose, faulty, wrap=hosts.wrap(name)))
         sim_args = [
             "sim",
             "--serve",
@@ -740,6 +765,9 @@ def launch(
     m["crashed_processes"] = sorted(crashed)
     m["restarts"] = dict(sup.restarts)  # children restarted after exiting unexpectedly
     m["stopped_because"] = error or "unknown"
+    if opts.coordinators > 1:
+        m["leaders"] = [[t, n, s, round(w - t0, 3)] for t, n, s, w in obs.leaders]
+        m["takeover_s"] = _takeovers(obs)
     if net is not None:
         m["link_outages"] = obs.outages.to_list()
         m["maps_agree"] = netns.maps_agree(Path(cfg.persist.dir), ids)
@@ -796,7 +824,22 @@ def _network(opts: LaunchOptions, ids: list[str], out: Path):
         return None
     run = os.urandom(2).hex()
     (out / "logs" / "netns.json").write_text(json.dumps({"run": run, "hosts": ids}))
-    return netns.FleetNetwork.create(run, ["coordinator", *ids], out / "sockets")
+    hosts = ["coordinator", *_standbys(opts), *ids]
+    return netns.FleetNetwork.create(run, hosts, out / "sockets")
+
+
+def _takeovers(obs: Observer) -> list[float]:
+    """Wall seconds from each kill of a coordinator to the first status of a new leader."""
+    out = []
+    for lost in obs.coordinator_lost:
+        after = [w for _, _, _, w in obs.leaders[1:] if w >= lost]
+        if after:
+            out.append(round(after[0] - lost, 3))
+    return out
+
+
+def _standbys(opts: LaunchOptions) -> list[str]:
+    return [f"coordinator{k}" for k in range(2, opts.coordinators + 1)]
 
 
 def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0, sup, net=None) -> str:
@@ -835,6 +878,8 @@ def _watch(bus, keys, obs: Observer, opts, children, stop, progress, t0, sup, ne
         while pending and obs.sim_t >= pending[0].at_s:
             fault = pending.pop(0)
             _inject(fault, children, logs, net)
+            if fault.action == FaultAction.KILL and fault.target.startswith("coordinator"):
+                obs.coordinator_lost.append(now)
             if fault.action == FaultAction.CUT:
                 view = obs.robots.get(fault.target)
                 obs.outages.cut(fault.target, obs.sim_t, view.keyframes if view else 0)

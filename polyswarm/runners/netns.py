@@ -186,11 +186,12 @@ class Hosts:
     def wrap(self, host: str) -> list[str]:
         return [] if self.net is None else self.net.wrap(host)
 
-    def coordinator_args(self) -> list[str]:
+    def coordinator_args(self, name: str = "coordinator") -> list[str]:
         if self.net is None:
             return ["--connect", self.endpoint]
-        listen = ",".join(self.net.listen("coordinator"))
-        return ["--listen", listen, "--connect", self.net.unix_endpoint("launch")]
+        listen = ",".join(self.net.listen(name))
+        mesh = [*self.net.mesh(name), self.net.unix_endpoint("launch")]
+        return ["--listen", listen, "--connect", ",".join(mesh)]
 
     def agent_args(self, rid: str) -> list[str]:
         if self.net is None:
