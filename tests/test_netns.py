@@ -135,3 +135,16 @@ def test_ctrl_c_removes_the_network(tmp_path):
     proc.send_signal(signal.SIGINT)
     proc.wait(timeout=120)
     assert _ours(run) == []
+
+
+def test_bench_fleet_compares_one_stack_with_namespaces_side_by_side(tmp_path):
+    from polyswarm.benchmarks import fleet
+
+    res = fleet.run((2,), "rooms", 60.0, tmp_path)
+    one, mesh = res["runs"]
+    assert (one["netns"], mesh["netns"]) == (False, True)
+    assert one["final_coverage"] >= 0.95 and mesh["final_coverage"] >= 0.95
+    assert mesh["maps_agree"] is True and one["maps_agree"] is None
+    ratio = res["bytes_per_robot_ratio_netns_vs_loopback"]["2"]
+    assert ratio == mesh["bytes_per_robot_per_sim_s"] / one["bytes_per_robot_per_sim_s"]
+    assert 0.5 < ratio < 2.0  # the same messages, over a mesh of routers

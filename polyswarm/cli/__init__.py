@@ -123,7 +123,14 @@ def load_cfg(config_path, profile: str | None = None):
 
 
 # command modules register themselves on the apps above
-from polyswarm.cli import bench_cmds, map_cmds, sim_cmds, slam_cmds, swarm_cmds  # noqa: E402,F401
+from polyswarm.cli import (  # noqa: E402,F401
+    bench_cmds,
+    bench_fleet_cmds,
+    map_cmds,
+    sim_cmds,
+    slam_cmds,
+    swarm_cmds,
+)
 
 
 def main(argv: list[str] | None = None) -> None:
