@@ -18,24 +18,18 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
 import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from agents import persist
 from agents.alone import Alone
 from agents.behaviour import Behaviour
-from agents.leadership import Following
 from agents.seen import SeenObstacles
 from polyswarm.config import Config, SensorSource, known_starts
 from polyswarm.errors import (
-    DecodeError,
     DeltaGapError,
-    MapError,
     PlanningError,
-    PolyswarmError,
 )
 from polyswarm.explore.targets import Sensor
 from polyswarm.frames.sighting import PROFILE_PERIOD_S, clear_profile
@@ -49,23 +43,12 @@ from polyswarm.slam.follow import CorrectionOp, pose_of
 from polyswarm.slam.odometry import OdometryBuffer
 from polyswarm.slam.polyslam import PolySlam
 from polyswarm.slam.scan import LaserScan, beam_angles, classify, deskew_motion, scan_to_points
-from protocols.keys import SwarmKeys, check_name
-from protocols.mapcodec import (
-    decode_delta,
-    decode_map,
-    encode_cells_map,
-    encode_delta,
-    encode_updates,
-)
+from protocols.keys import check_name
 from protocols.messages import (
-    MAP_KIND_OF,
     MAX_STATUS_PATH_POINTS,
     Anchor,
     Assignment,
     AssignmentKind,
-    CoordinatorStatus,
-    MapChunk,
-    MapKind,
     Odometry,
     Pose,
     Priors,
@@ -88,7 +71,6 @@ PEER_FRESH_S = 2.0
 # first lane: jumps of 2.5 and 4.2 m along it)
 PEER_MASK_M = 0.6
 BLOB_MARGIN_M = 0.15  # a robot's blob of returns may be this much wider than the robot
-SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
 MOUNT_WAIT_SCANS = 20  # scans from a ROS robot without a mount in tf or config: say so
 ODOM_BUFFER = 200  # odometry messages kept to find the one at a scan's time
 NEAR_OBSTACLE_M = 0.5  # range at which the local controller's margin is judged
@@ -611,249 +593,3 @@ def scan_end_s(item) -> float:
     """When a scan message's last beam was taken: its points need odometry until then."""
     msg: Scan = item.msg
     return item.stamp_s + msg.time_increment_s * max(len(msg.ranges_m) - 1, 0)
-
-
-# --- the process --------------------------------------------------------------------------------
-
-
-def run_agent(
-    robot_id: str,
-    cfg: Config,
-    start_pose,
-    session_spec,
-    stop: threading.Event | None = None,
-    duration_s: float = 0.0,
-    attach=None,
-    frame_known: bool = True,
-) -> RobotAgent:
-    """Run the agent on a Zenoh session until ``stop`` is set (or SIGINT/SIGTERM).
-
-    ``attach(session, agent, stop)``, if given, is called once the agent listens (a log
-    player feeding it, for example); it may return a function called at shutdown."""
-    from agents.session import Bus, is_alive_change, open_session, stop_on_signals
-    from agents.sources import CommandSink, RmwZenohNode, RosFrames, subscribe_sensors
-
-    stop = stop or stop_on_signals()
-    keys = SwarmKeys(cfg.comms.swarm)
-    me = keys.robot(robot_id)
-    agent = RobotAgent(robot_id, cfg, start_pose, frame_known)
-    state_dir = cfg.persist.dir
-    if state_dir:
-        saved = persist.load_agent(state_dir, robot_id)
-        if saved is not None:
-            agent.resume(*saved)
-            log.info(
-                "%s: resumed from %s (map version %d, %.1f m2, pose %s)",
-                robot_id,
-                state_dir,
-                saved.map.version,
-                saved.map.explored_area(),
-                np.round(saved.pose, 3).tolist(),
-            )
-    t_end = time.monotonic() + duration_s if duration_s > 0 else math.inf
-    with open_session(session_spec) as session:
-        bus = Bus(session, robot_id)
-        try:
-            frames = RosFrames()
-            node = ros_node = None
-            if cfg.agent.source == SensorSource.RMW_ZENOH:
-                node = RmwZenohNode(bus, cfg.agent, robot_id)
-                node.declare()
-            if cfg.agent.source == SensorSource.ROS2_NODE:
-                from agents.ros2_node import Ros2Node
-
-                ros_node = Ros2Node(bus, cfg.agent, robot_id, frames)
-                sensors = [ros_node.scan_topic, ros_node.odom_topic]
-            else:
-                sensors = subscribe_sensors(bus, me, cfg.agent, frames)
-            sink = CommandSink(bus, me, cfg.agent, node, ros_node)
-            bus.subscribe(keys.all_robots("pose"), Pose)
-            bus.subscribe(keys.assignment(robot_id), Assignment)
-            bus.subscribe(keys.anchor(robot_id), Anchor)
-            bus.subscribe(keys.priors(robot_id), Priors)
-            bus.subscribe(keys.merged_delta, MapChunk)
-            bus.subscribe(keys.coordinator_status, CoordinatorStatus)
-            # all cells exactly: the coordinator's copy must be bit-identical to replay merges
-            bus.serve_map(
-                me.map,
-                lambda: (encode_cells_map(agent.slam.map), agent.slam.map.version),
-                MapKind.DELTA,
-            )
-            bus.declare_alive(keys.alive("agent", robot_id))
-            bus.watch_alive(keys.all_alive("coordinator"))
-            log.info(
-                "agent %s up (start pose %s, sensors on %s, output %s)",
-                robot_id,
-                tuple(agent.start_pose),
-                sensors,
-                cfg.agent.output,
-            )
-            detach = attach(session, agent, stop) if attach is not None else None
-            waiting: list = []  # (wall time, scan item) waiting for odometry
-            leader = Following()  # the coordinator it takes assignments from
-            need_merged = False
-            behind_since = None  # the merged map we hold is older than the coordinator's
-            while not stop.is_set() and time.monotonic() < t_end:
-                agent.use_tf_mount(frames.mount())
-                for item in bus.poll(timeout_s=0.05):
-                    if stop.is_set():  # a backlog of scans must not outlast the shutdown grace
-                        break
-                    alive = is_alive_change(item)
-                    if alive is not None:
-                        need_merged |= alive
-                        who = keys.alive_name(item.key)
-                        if who is not None and who[0] == "coordinator":
-                            agent.on_coordinator_alive(who[1], alive)
-                        continue
-                    msg = item.msg
-                    try:
-                        if isinstance(msg, Odometry):
-                            agent.on_odom(item.stamp_s, msg)
-                            while waiting and scan_end_s(waiting[0][1]) <= item.stamp_s:
-                                _process_scan(bus, me, agent, waiting.pop(0)[1], sink, state_dir)
-                        elif isinstance(msg, Scan):
-                            agent.use_tf_mount(frames.mount())  # before the first scan
-                            # odometry and scans travel on separate keys: a scan waits
-                            # (briefly) for the odometry of its time
-                            if agent.latest_odom_s >= scan_end_s(item):
-                                _process_scan(bus, me, agent, item, sink, state_dir)
-                            else:
-                                waiting.append((time.monotonic(), item))
-                        elif isinstance(msg, Pose):
-                            rid = keys.robot_of(item.key)
-                            if rid is not None:
-                                agent.on_peer_pose(rid, item.stamp_s, msg)
-                        elif isinstance(msg, Assignment):
-                            if leader.admits(item.sender, msg):
-                                agent.on_assignment(msg, item.stamp_s)
-                                sink.assignment(agent.assignment, item.stamp_s)
-                        elif isinstance(msg, Anchor):
-                            agent.on_anchor(msg)
-                            need_merged = True
-                        elif isinstance(msg, Priors):
-                            agent.on_priors(msg)
-                        elif isinstance(msg, MapChunk) and item.payload is not None:
-                            try:
-                                agent.on_merged_delta(decode_delta(item.payload))
-                            except MapError:  # a gap (or no map yet): resync
-                                need_merged = True
-                        elif isinstance(msg, CoordinatorStatus):
-                            held = leader.heard(msg)
-                            if held is not None:  # a new leader: its map, its last order
-                                need_merged = True
-                                if held.assignment is not None:
-                                    agent.on_assignment(held.assignment, item.stamp_s)
-                                    sink.assignment(agent.assignment, item.stamp_s)
-                            have = -1 if agent.merged is None else agent.merged.version
-                            behind = msg.map_version > have
-                            behind_since = (behind_since or time.monotonic()) if behind else None
-                            if behind_since and time.monotonic() - behind_since > 1.0:
-                                need_merged, behind_since = True, None
-                    except DecodeError as e:
-                        log.warning("%s: rejected %s: %s", robot_id, item.key, e)
-                        agent.stats.refused += 1
-                    except PolyswarmError as e:
-                        log.warning("%s: %s", robot_id, e)
-                while waiting and time.monotonic() - waiting[0][0] > SCAN_WAIT_S:
-                    _process_scan(bus, me, agent, waiting.pop(0)[1], sink, state_dir)
-                if ros_node is not None:
-                    ros_node.publish_map(agent.planning_map, agent.target_xy)
-                if need_merged and agent.in_shared_frame:
-                    got = bus.fetch_map(keys.merged_map, timeout_s=2.0)
-                    if got is not None:
-                        try:
-                            agent.on_merged_map(decode_map(got[0]))
-                            need_merged = False
-                        except DecodeError as e:
-                            log.warning("%s: bad merged map: %s", robot_id, e)
-        finally:
-            if attach is not None and detach is not None:
-                detach()
-            if ros_node is not None:
-                ros_node.close()
-            agent.stats.refused += bus.rejected  # refused by the decoders on arrival
-            bus.close()
-            st = agent.stats
-            log.info(
-                "%s: %d scans, %d keyframes, %.1f m driven; returns kept from SLAM as other "
-                "robots' %d, left out of ICP as blobs %d; messages refused %d",
-                robot_id,
-                st.scans,
-                st.keyframes,
-                st.distance_m,
-                st.peer_returns_masked,
-                agent.slam.blob_returns_skipped,
-                st.refused,
-            )
-            if state_dir:  # the map is on disk already (snapshot and journal): the pose
-                persist.save_pose(
-                    state_dir,
-                    robot_id,
-                    agent.pose,
-                    agent.slam.map.version,
-                    agent.slam.odom,
-                    agent.frame,
-                    agent.slam.odometry_scale,
-                    agent.own_frame,
-                )
-    return agent
-
-
-def _process_scan(bus, me, agent: RobotAgent, item, sink, state_dir: str = "") -> None:
-    try:
-        out = agent.on_scan(item.stamp_s, scan_from_message(item.msg, item.stamp_s))
-    except PolyswarmError as e:
-        log.warning("%s: scan %d refused: %s", agent.id, item.seq, e)
-        agent.stats.refused += 1
-        return
-    wire = encode_delta(out.delta) if out.delta is not None else None
-    if wire is not None and state_dir:
-        # on disk before anyone has seen it: a restart never reuses a published version
-        if agent.journaled == 0 or agent.journaled >= persist.SNAPSHOT_EVERY:
-            persist.save_agent(
-                state_dir,
-                agent.id,
-                agent.slam.map,
-                agent.pose,
-                agent.slam.odom,
-                agent.frame,
-                agent.slam.odometry_scale,
-                agent.own_frame,
-            )
-            agent.journaled = 1
-        else:
-            persist.journal_delta(
-                state_dir,
-                agent.id,
-                wire,
-                agent.pose,
-                out.delta.version,
-                agent.slam.odom,
-                agent.frame,
-                agent.slam.odometry_scale,
-                agent.own_frame,
-            )
-            agent.journaled += 1
-    _send(bus, me, agent, out, item.stamp_s, item.seq, sink, wire)
-
-
-def _send(
-    bus, me, agent: RobotAgent, out: Outbox, stamp_s: float, scan_seq: int, sink, wire=None
-) -> None:
-    """Send what ``out`` holds; ``wire`` is the delta already encoded (or None)."""
-    if out.cmd is not None:
-        sink.velocity(out.cmd[0], out.cmd[1], scan_seq, stamp_s)
-    sent = 0
-    if out.delta is not None:
-        # a correction's poses, then the keyframe's merge when it is smaller than the
-        # cells it changed (polyswarm.slam.follow, protocols.mapcodec.encode_updates)
-        for what, base, ver, payload in encode_updates(out.delta, out.op, out.correction, wire):
-            kind = MAP_KIND_OF[what]
-            sent += bus.publish_map(me.map_delta, kind, payload, base, ver, stamp_s)
-    if out.assignment is not None:
-        sink.assignment(out.assignment, stamp_s)
-    if out.pose is not None:
-        sent += bus.publish(me.pose, out.pose, stamp_s)
-    if out.status is not None:
-        sent += bus.publish(me.status, out.status, stamp_s, reliable=True)
-    agent.bytes_sent = bus.total_bytes_sent - bus.bytes_sent.get(me.cmd_vel, 0)

@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from agents.robot import run_agent
+from agents.agent_node import run_agent
 from agents.session import SessionSpec, open_session
 from polyswarm.benchmarks.bagmaker import MOUNT, make_bag
 from polyswarm.config import AgentIoConfig, Config

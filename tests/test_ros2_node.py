@@ -21,7 +21,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan as RosLaserScan
 
-from agents.robot import run_agent
+from agents.agent_node import run_agent
 from agents.session import SessionSpec, open_session
 from polyswarm.config import AgentIoConfig, Config
 from polyswarm.evaluation.maps import map_iou

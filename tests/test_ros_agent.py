@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import shapely
 
-from agents.robot import run_agent
+from agents.agent_node import run_agent
 from agents.session import SessionSpec, open_session
 from polyswarm.config import AgentIoConfig, Config
 from polyswarm.runners.replay import LogPlayer, start_player

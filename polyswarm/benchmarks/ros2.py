@@ -79,7 +79,7 @@ def _thread_cpu_s(names: tuple[str, ...]) -> tuple[float, float]:
 
 def run_path(source: str, duration_s: float = DURATION_S) -> dict:
     """The stream through one path (``ros2-node`` or ``ros2``), the agent in this process."""
-    from agents.robot import run_agent
+    from agents.agent_node import run_agent
     from agents.session import SessionSpec, open_session
     from polyswarm.config import AgentIoConfig, Config, with_overrides
     from polyswarm.runners.launch import free_port

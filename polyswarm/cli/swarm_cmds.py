@@ -82,7 +82,7 @@ def agent_cmd(
     import logging
     import threading
 
-    from agents.robot import run_agent
+    from agents.agent_node import run_agent
     from agents.session import stop_on_signals
     from polyswarm.config import known_starts, load_config
     from protocols.keys import SwarmKeys, check_name
