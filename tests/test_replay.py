@@ -250,7 +250,7 @@ def test_launch_counts_a_childs_own_children_in_its_memory():
     import subprocess
     from types import SimpleNamespace
 
-    from polyswarm.runners.launch import _process_tree, _rss_mb
+    from polyswarm.runners.children import _process_tree, _rss_mb
 
     proc = subprocess.Popen(["bash", "-c", "sleep 30 & wait"])
     try:

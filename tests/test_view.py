@@ -15,7 +15,8 @@ from agents.view import ViewState, cell_svg
 from polyswarm.benchmarks.view import BROWSER_ARGS, CHROMIUM, wait_http
 from polyswarm.config import load_config
 from polyswarm.polymap import GridPolyMap
-from polyswarm.runners.launch import Fault, LaunchOptions, free_port, launch
+from polyswarm.runners.children import free_port
+from polyswarm.runners.launch import Fault, LaunchOptions, launch
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_map
 from tests.conftest import rect

@@ -31,7 +31,7 @@ REPLAY_RATE = 5.0
 def replay(bag: Path, rate: float = REPLAY_RATE) -> dict:
     """``polyswarm agent --replay`` in its own process; its summary line parsed."""
     cmd = [sys.executable, "-m", "polyswarm", "agent", "--id", "r1", "--replay", str(bag)]
-    from polyswarm.runners.launch import free_port
+    from polyswarm.runners.children import free_port
 
     cmd += ["--rate", str(rate), "--listen", f"tcp/127.0.0.1:{free_port()}"]
     t0 = time.perf_counter()

@@ -82,7 +82,7 @@ def run_path(source: str, duration_s: float = DURATION_S) -> dict:
     from agents.agent_node import run_agent
     from agents.session import SessionSpec, open_session
     from polyswarm.config import AgentIoConfig, Config, with_overrides
-    from polyswarm.runners.launch import free_port
+    from polyswarm.runners.children import free_port
     from polyswarm.slam.scan import LaserScan
     from protocols import ros
 

@@ -71,7 +71,8 @@ def _run(opts, with_page: bool):
 
 
 def run(robots: int, world: str, duration_s: float, seed: int = 0) -> dict:
-    from polyswarm.runners.launch import LaunchOptions, free_port
+    from polyswarm.runners.children import free_port
+    from polyswarm.runners.launch import LaunchOptions
 
     out = {"robots": robots, "world": world, "duration_s": duration_s, "seed": seed}
     with tempfile.TemporaryDirectory() as d:
