@@ -126,6 +126,8 @@ def load_cfg(config_path, profile: str | None = None):
 from polyswarm.cli import (  # noqa: E402,F401
     bench_cmds,
     bench_fleet_cmds,
+    bench_map_cmds,
+    bench_mission_cmds,
     map_cmds,
     sim_cmds,
     slam_cmds,
