@@ -26,7 +26,7 @@ import numpy as np
 from agents.alone import Alone
 from agents.behaviour import Behaviour
 from agents.seen import SeenObstacles
-from polyswarm.config import Config, SensorSource, known_starts
+from polyswarm.config import CommandOutput, Config, SensorSource, known_starts
 from polyswarm.errors import (
     DeltaGapError,
     PlanningError,
@@ -34,6 +34,7 @@ from polyswarm.errors import (
 from polyswarm.explore.targets import Sensor
 from polyswarm.frames.sighting import PROFILE_PERIOD_S, clear_profile
 from polyswarm.nav.control import ControlParams, PathFollower
+from polyswarm.nav.guard import guard
 from polyswarm.nav.navgraph import NavGraph, clear_of
 from polyswarm.nav.planner import Planner
 from polyswarm.nav.recent import RecentReturns
@@ -347,7 +348,9 @@ class RobotAgent:
         self._remember_unmapped(stamp_s, world)
         out.assignment = self._own_target(stamp_s)
         obstacles, moving = self._obstacles(stamp_s, odom, xy, world)
-        out.cmd = self.behaviour.step(stamp_s, self.pose, obstacles, moving, turned)
+        out.cmd = self._guarded(
+            self.behaviour.step(stamp_s, self.pose, obstacles, moving, turned), obstacles
+        )
         self.follower.sent(*out.cmd)  # arcs start from what the base does
         # 4. pose and state for the coordinator
         if stamp_s - self._last_pose_t >= POSE_PERIOD_S or step.delta is not None:
@@ -431,6 +434,22 @@ class RobotAgent:
         self.seen.forget_seen_through(world, self.pose[:2])
         keep = ~self._near_peers(world, stamp_s)
         self.seen.add(stamp_s, world[keep], self.pose[:2], pmap)
+
+    def _guarded(self, cmd: tuple[float, float], obstacles: np.ndarray) -> tuple[float, float]:
+        """To a real base through ``cmd_vel`` (output "twist"): no translation towards a
+        return in the way, within the speed limits (``polyswarm.nav.guard``)."""
+        io = self.cfg.agent
+        if io.output != CommandOutput.TWIST:
+            return cmd
+        base = self.cfg.sim.robot
+        return guard(
+            *cmd,
+            obstacles,
+            self.cfg.nav.robot_radius_m,
+            io.stop_distance_m,
+            io.max_linear_mps or base.max_linear_mps,
+            io.max_angular_radps or base.max_angular_radps,
+        )
 
     def on_coordinator_alive(self, name: str, alive: bool) -> None:
         self.alone.coordinator(name, alive, self._now_s)

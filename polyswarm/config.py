@@ -463,6 +463,12 @@ class AgentIoConfig:
     cmd_vel_key: str = "{ns}/cmd_vel"
     goal_key: str = "{ns}/goal_pose"
     map_frame: str = "map"  # frame id of goals sent to the robot's navigation stack
+    # output "twist": no translation towards a return closer than this beyond the robot's
+    # body (metres; the controller keeps 0.03 m more), and the speed limits (0: the
+    # profile's base)
+    stop_distance_m: float = num(0.02, 0.0, 1.0)
+    max_linear_mps: float = num(0.0, 0.0, 5.0)
+    max_angular_radps: float = num(0.0, 0.0, 10.0)
     # rmw_zenoh: the robot's ROS_DOMAIN_ID (the first chunk of its keys), 0-232: ROS 2's range
     domain_id: int = num(0, 0, 232)
 

@@ -215,3 +215,18 @@ def test_a_team_anchor_moves_the_robot_into_a_frame_that_is_not_the_shared_one()
     agent.on_scan(0.9, room_scan(0.9))
     assert agent.frame == 2 and not agent.own_frame and agent.in_shared_frame
     assert np.allclose(agent.pose, [3.0, 0.0, 0.5], atol=1e-6)
+
+
+def test_with_twist_output_the_agent_guards_what_its_controller_sends():
+    """Its own controller drives a real base through cmd_vel: a forward command towards
+    a return just beyond the body (a person who stepped in front) becomes a stop, a
+    command over the limit is clamped; with the simulator's native output, neither."""
+    from polyswarm.config import with_overrides
+
+    person = np.array([[Config().nav.robot_radius_m + 0.01, 0.0]])
+    twist = with_overrides(Config(), {"agent": {"output": "twist", "max_linear_mps": 0.3}})
+    guarded = RobotAgent("r1", twist, (0.0, 0.0, 0.0))
+    assert guarded._guarded((0.4, 0.2), person) == (0.0, 0.2)
+    assert guarded._guarded((0.4, 0.2), np.zeros((0, 2))) == (0.3, 0.2)
+    native = RobotAgent("r1", Config(), (0.0, 0.0, 0.0))
+    assert native._guarded((0.4, 0.2), person) == (0.4, 0.2)
