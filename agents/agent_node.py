@@ -42,7 +42,7 @@ from protocols.messages import (
 
 log = logging.getLogger(__name__)
 
-SCAN_WAIT_S = 0.2  # wall seconds a scan waits for the odometry of its time
+SCAN_WAIT_S = 0.2  # wall seconds without odometry after which a scan goes without it
 
 
 def run_agent(
@@ -90,6 +90,7 @@ class AgentNode:
         if self.state_dir:
             self._resume()
         self.waiting: list = []  # (wall time, scan item) waiting for odometry
+        self.odom_wall = -math.inf  # wall time the last odometry message arrived
         self.need_merged = False
         self.behind_since: float | None = None  # the merged map we hold is older
         self.leader = Following()  # the coordinator it takes assignments from
@@ -162,7 +163,12 @@ class AgentNode:
                 agent.stats.refused += 1
             except PolyswarmError as e:
                 log.warning("%s: %s", self.id, e)
-        while self.waiting and time.monotonic() - self.waiting[0][0] > SCAN_WAIT_S:
+        # a scan goes without the odometry of its time only once odometry has gone quiet:
+        # while it flows (late, or queued behind a busy step) the scan waits for it
+        while (
+            self.waiting
+            and time.monotonic() - max(self.waiting[0][0], self.odom_wall) > SCAN_WAIT_S
+        ):
             self.process_scan(self.waiting.pop(0)[1])
         if self.ros_node is not None:
             self.ros_node.publish_map(agent.planning_map, agent.target_xy)
@@ -180,6 +186,7 @@ class AgentNode:
             if who is not None and who[0] == "coordinator":
                 agent.on_coordinator_alive(who[1], alive)
         elif isinstance(msg, Odometry):
+            self.odom_wall = time.monotonic()
             agent.on_odom(item.stamp_s, msg)
             while self.waiting and scan_end_s(self.waiting[0][1]) <= item.stamp_s:
                 self.process_scan(self.waiting.pop(0)[1])

@@ -35,6 +35,7 @@ NODE_NAME = "polyswarm_agent"
 MAP_PERIOD_S = 1.0  # the map is published at most this often (map_server latches once)
 MAP_RESOLUTION_M = 0.05  # the OccupancyGrid's cells: the evidence grid's
 FRONTIER_WIDTH_M = 0.05  # line width of the frontier markers
+SCAN_DEPTH = 50  # sweeps held for the executor: 10 s of a 5 Hz lidar
 
 
 def _stamp(header) -> float:
@@ -82,9 +83,14 @@ class Ros2Node:
             f"{NODE_NAME}_{robot_id}", namespace="/" + io.namespace.strip("/"), context=self.context
         )
         self.scan_topic, self.odom_topic = topic(io.scan_key), topic(io.odom_key)
-        self.node.create_subscription(
-            RosLaserScan, self.scan_topic, self._on_scan, qos_profile_sensor_data
+        # best effort like every lidar driver, but a deeper history than the sensor-data
+        # profile's 5: a sweep that arrives while the executor is busy is not lost
+        sensor = QoSProfile(
+            depth=SCAN_DEPTH,
+            reliability=qos_profile_sensor_data.reliability,
+            durability=qos_profile_sensor_data.durability,
         )
+        self.node.create_subscription(RosLaserScan, self.scan_topic, self._on_scan, sensor)
         self.node.create_subscription(RosOdometry, self.odom_topic, self._on_odom, 50)
         latched = QoSProfile(
             depth=1,

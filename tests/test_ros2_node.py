@@ -96,7 +96,7 @@ def test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node(shared_da
             agent_thread = threading.Thread(
                 target=lambda: result.update(
                     agent=run_agent(
-                        "r1", cfg, offline.estimate[0], SessionSpec.client(endpoint), stop
+                        "r1", cfg, offline.odometry[0], SessionSpec.client(endpoint), stop
                     )
                 )
             )
@@ -106,7 +106,8 @@ def test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node(shared_da
                 nodes = {
                     f"{ns.rstrip('/')}/{n}" for n, ns in player.get_node_names_and_namespaces()
                 }
-                if "/neato/polyswarm_agent_r1" in nodes and scan_pub.get_subscription_count():
+                matched = scan_pub.get_subscription_count() and odom_pub.get_subscription_count()
+                if "/neato/polyswarm_agent_r1" in nodes and matched:
                     break
                 time.sleep(0.2)
             assert "/neato/polyswarm_agent_r1" in nodes, nodes  # as `ros2 node list` shows it
@@ -141,7 +142,10 @@ def test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node(shared_da
     assert agent.stats.scans >= 0.95 * len(bag.scans) and agent.stats.refused == 0
     # the map `polyswarm slam` makes of the recording offline
     iou = map_iou(agent.slam.map.explored_region(), offline.map.explored_region())
-    # measured 0.963: the same keyframes and area (45.2 m2), poses 4 cm apart at the end
+    # measured 0.963: the same keyframes and area (45.2 m2), poses 4 cm apart at the end.
+    # The agent gets every scan and the odometry at each scan's end to 1e-16 (traced);
+    # offline SLAM against itself with the odometry's heading off by 1e-15 rad gives
+    # 0.94: the gap to 0.99 is PolySLAM's sensitivity to its input's last bits
     assert iou >= 0.95, iou
     # the last map received is the agent's map, cell for cell at 5 cm
     assert maps, "no map reached the subscriber"
