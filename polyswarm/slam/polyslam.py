@@ -60,6 +60,10 @@ from polyswarm.slam.trim import trim_keyframe
 
 log = logging.getLogger(__name__)
 
+# odometry and de-skewing to the nanometre and nanoradian: the same recording through
+# any transport (a quaternion, float stamps) maps the same (ICP and the evidence match
+# are not continuous in their input's last bits)
+INPUT_DECIMALS = 9
 # a heading change of 1 rad moves the scan points 2 m away (typical indoor ranges) by
 # about 2 m: how loop corrections of heading and position are weighed against each other
 METRES_PER_RADIAN = 2.0
@@ -305,9 +309,11 @@ class PolySlam:
         ``polyswarm.slam.scan.isolated_blobs``) are left out of ICP and loop closure, still
         mapped: other robots the caller cannot place, which would pull the pose along
         a corridor as they move."""
-        odom = np.array(odom, dtype=float)
+        odom = np.round(np.array(odom, dtype=float), INPUT_DECIMALS)
         if not np.isfinite(odom).all():
             raise PolyswarmError(f"odometry pose is not finite: {odom}")
+        if motion is not None:
+            motion = np.round(np.asarray(motion, dtype=float), INPUT_DECIMALS)
         if self._anchor is not None:
             self._apply_anchor()
         # 3. pre-alignment: last keyframe pose plus the odometry increment since then
