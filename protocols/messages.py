@@ -321,6 +321,11 @@ class Pose(Message):
         )
 
 
+# a robot out of every coordinator's reach works on targets of its own, numbered from -2
+# down (``agents.alone``); -1 is none
+OWN_TARGET_MIN = -(2**31)
+
+
 @dataclass(frozen=True)
 class RobotStatus(Message):
     TYPE: ClassVar[str] = "robot-status"
@@ -351,7 +356,7 @@ class RobotStatus(Message):
     def from_body(cls, b: dict) -> RobotStatus:
         return cls(
             _str(b.get("state"), "state", RobotState),
-            _int(b.get("target", -1), "target", -1),
+            _int(b.get("target", -1), "target", OWN_TARGET_MIN),
             _str(b.get("detail", ""), "detail"),
             _int(b.get("kf", 0), "kf", 0),
             _int(b.get("ver", 0), "ver", 0),

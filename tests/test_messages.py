@@ -300,3 +300,13 @@ def test_a_poses_clear_profile_travels_whole_or_is_refused():
         body = {**Pose(1.0, 2.0, 0.5, 3).body(), "clr": bad}
         with pytest.raises(ProtocolError, match="clr"):
             Pose.from_body(body)
+
+
+def test_a_status_with_a_target_the_robot_chose_itself_is_valid():
+    """Out of every coordinator's reach a robot works on targets numbered from -2 down
+    (agents.alone): its status is a valid message, not a malformed one."""
+    from protocols.messages import RobotState, RobotStatus, decode, encode
+
+    status = RobotStatus(RobotState.NAVIGATING, -7, keyframes=3)
+    _, back = decode(encode(status, "r1", 0, 1.0), RobotStatus)
+    assert back.target == -7
