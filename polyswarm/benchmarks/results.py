@@ -72,10 +72,14 @@ def load(name: str, directory: Path = RESULTS_DIR) -> dict:
 
 
 def lookup(result: dict, key: str):
-    """The value at a dotted ``key`` (``runs.aces-corrected.keyframes``); a name that
-    holds a dot itself (``methods.akaze_conf1.0.wrong``) is found as one."""
+    """The value at a dotted ``key`` (``runs.aces-corrected.keyframes``; ``runs.0.x``
+    indexes a list); a name that holds a dot itself (``methods.akaze_conf1.0.wrong``) is
+    found as one."""
     node, parts = result, key.split(".")
     while parts:
+        if isinstance(node, list) and parts[0].isdigit() and int(parts[0]) < len(node):
+            node, parts = node[int(parts[0])], parts[1:]  # ``runs.0.t99_s``: the first run
+            continue
         if not isinstance(node, dict):
             raise PolyswarmError(f"no {key!r} in the result ({parts[0]!r} missing)")
         for n in range(len(parts), 0, -1):  # the longest name that is there
