@@ -46,3 +46,14 @@ def test_flags_show_no_value_in_help():
         res = runner.invoke(app, [*path, "--help"], env={"COLUMNS": "120"})
         assert res.exit_code == 0, (path, res.output)
         assert "<bool>" not in res.output, path
+
+
+def test_durations_say_their_clock_in_the_name():
+    """--time-limit is simulated seconds, --wall-limit wall-clock seconds, everywhere."""
+    for path, cmd in _commands():
+        opts = _options(cmd)
+        assert "--duration" not in opts, path
+        if "--time-limit" in opts:
+            assert "simulated" in opts["--time-limit"].lower(), path
+        if "--wall-limit" in opts:
+            assert "wall" in opts["--wall-limit"].lower(), path

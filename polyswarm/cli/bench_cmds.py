@@ -149,7 +149,9 @@ def bench_sim(
 def bench_ros2(
     as_json: bool = JSON_OPT,
     save: str | None = SAVE_OPT,
-    duration: float = typer.Option(30.0, min=5.0, help="Seconds of lidar stream per path."),
+    duration: float = typer.Option(
+        30.0, "--wall-limit", min=5.0, help="Wall-clock seconds of lidar stream per path."
+    ),
 ) -> None:
     """The agent as a ROS 2 node (rclpy, Fast DDS) against the Zenoh path: CPU, map latency."""
     from rich.console import Console
@@ -228,7 +230,9 @@ def bench_view(
     save: str | None = SAVE_OPT,
     robots: int = typer.Option(10, min=1, help="Robots."),
     world: str = typer.Option("data:maze", help="World to explore."),
-    duration: float = typer.Option(120.0, help="Wall-clock seconds of each of the two runs."),
+    duration: float = typer.Option(
+        120.0, "--wall-limit", help="Wall-clock seconds of each of the two runs."
+    ),
 ) -> None:
     """The live view: display latency, its CPU, the coordinator with and without it."""
     from rich.console import Console

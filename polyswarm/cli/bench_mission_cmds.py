@@ -206,7 +206,7 @@ def bench_load(
     save: str | None = SAVE_OPT,
     robots: int = typer.Option(10, min=1, help="Robots (agent processes)."),
     world: str = typer.Option("data:maze", help="World to explore."),
-    duration: float = typer.Option(1800.0, help="Soak length, wall-clock seconds."),
+    duration: float = typer.Option(1800.0, "--wall-limit", help="Soak length, wall-clock seconds."),
     out: Path = typer.Option(None, help="Run folder (default: a temporary folder)."),
     robots_nice: int = typer.Option(
         5,

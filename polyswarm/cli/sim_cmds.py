@@ -18,7 +18,7 @@ WORLD_HELP = (
 def sim_cmd(
     world: str = typer.Option("office", help=WORLD_HELP),
     robots: int = typer.Option(1, min=1, help="Number of robots."),
-    duration: float = typer.Option(60.0, help="Simulated seconds to run."),
+    duration: float = typer.Option(60.0, "--time-limit", help="Simulated seconds to run."),
     seed: int = typer.Option(0, help="Seed for noise, procedural maze and wandering."),
     gui: bool = typer.Option(False, "--gui", help="Open the pybullet GUI (needs a display)."),
     out: Path | None = typer.Option(None, help="Write a PNG of the world and trajectories here."),

@@ -53,7 +53,9 @@ def agent_cmd(
     start: str | None = typer.Option(
         None, help="Start pose x,y,theta (metres, radians) in the shared map frame."
     ),
-    duration: float = typer.Option(0.0, help="Stop after this many wall seconds (0: run)."),
+    duration: float = typer.Option(
+        0.0, "--wall-limit", help="Stop after this many wall-clock seconds (0: run on)."
+    ),
     replay: Path | None = typer.Option(
         None,
         help="Feed this CARMEN log (.log or .log.gz) or ROS bag (ROS 1 .bag; rosbag2 "
