@@ -323,51 +323,19 @@ class PolySlam:
             else compose(self._kf_pose, self._odometry_step(odom))
         )
         t = {"start": time.perf_counter()}
-        m = self.cfg.mount
         # 1. scan to points (robot frame, de-skewed; invalid beams become free space,
         #    short frontier points, or are left out)
-        points = scan_to_points(
-            scan,
-            self.cfg.frontier_range_m,
-            (m.x_m, m.y_m, m.yaw_rad, m.upside_down),
-            self.cfg.no_return_free_m,
-            self.out_of_range,
-            motion,
-        )
+        points = self._points(scan, motion)
         t["points"] = time.perf_counter()
         # 2. keyframe selection: enough travel or rotation, or a view of new space
-        due = self.selector.due(odom) or self._keyframe_requested
-        if not due and self.cfg.keyframe_novelty > 0 and self.map.cells:
-            due = self.selector.moved(odom, NOVELTY_MIN_STEP) and self._sees_new_space(points, pred)
-        if not due:
-            self.pose, self.odom = pred, odom
-            if self.evidence is not None and len(self.graph):  # seen from its keyframe
-                node = len(self.graph) - 1
-                self.evidence.add(
-                    node, self.graph.poses[node], relative(self._kf_pose, pred), points
-                )
-            if self.keep_trajectory:  # as seen from its keyframe, to follow corrections
-                self._steps.append((len(self.graph) - 1, relative(self._kf_pose, pred)))
-            return SlamStep(pred, False)
-        # 4. point-to-vector ICP against the obstacle vectors near the robot
+        if not self._keyframe_due(odom, points, pred):
+            return self._track(pred, odom, points)
         start_version = self.map.version
         anchor_base, self._anchor_base = self._anchor_base, None
         if anchor_base is not None:  # moved into another frame: the delta starts before
             start_version = anchor_base
-        res = None
-        pose = pred
-        aligned = points.valid
-        if blobs_m > 0:
-            blobs = isolated_blobs(points, blobs_m)
-            self.blob_returns_skipped += int(blobs.sum())
-            aligned = aligned & ~blobs
-        valid = points.xy[aligned]
-        if len(valid) and (self.store or self.map.cells):
-            res = self._align(valid, pred, points.origin)
-            if self.evidence is not None and res.inliers > 0:
-                res = self._refine_on_evidence(res, valid, scan.range_max)
-            pose = res.pose if res.inliers > 0 else pred
-            self.degenerate_keyframes += res.degenerate_axis is not None
+        # 4. point-to-vector ICP against the obstacle vectors near the robot
+        res, pose, valid = self._match(points, pred, blobs_m, scan.range_max)
         pinned = self._learn_scale(res, odom, len(valid))
         t["icp"] = time.perf_counter()
         # 4b. pose graph: this keyframe's node, its tracking edge, and a loop edge when
@@ -379,11 +347,86 @@ class PolySlam:
         t["loop"] = time.perf_counter()
         # 5. keyframe polygon, closed through the sensor centre: of the scan's points, or
         #    of the view of every scan's evidence from the keyframe's lidar
+        kf = self._keyframe_polygon(scan, points, pose)
+        t["polygon"] = time.perf_counter()
+        # 6. refinement by line fitting (always a valid simple polygon)
+        kf, how = refine_polygon(kf, self.cfg.refine)
+        t["refine"] = time.perf_counter()
+        # 7. merge into the robot's map, its vertices on the wire's grid; the changed cells
+        # are the delta, and the merge itself is a smaller one
+        # (after a correction, the delta starts before it)
+        correction, self._correction = self._correction, None
+        base = self.map.version
+        if correction is not None or anchor_base is not None:
+            base = start_version
+        op = self._merge(kf, pose)
+        if anchor_base is not None and correction is None:
+            op = None  # a map moved as cells: receivers take the cells, not a replay
+        t["merge"] = time.perf_counter()
+        delta = self.map.delta_since(base) if self.map.version != base else None
+        self._keyframe_done(pose, kf, odom, pinned)
+        return SlamStep(
+            self.pose.copy(),
+            True,
+            delta,
+            op,
+            correction,
+            res,
+            how,
+            _stage_ms(t),
+            anchor_base is not None,
+        )
+
+    def _points(self, scan: LaserScan, motion):
+        m = self.cfg.mount
+        return scan_to_points(
+            scan,
+            self.cfg.frontier_range_m,
+            (m.x_m, m.y_m, m.yaw_rad, m.upside_down),
+            self.cfg.no_return_free_m,
+            self.out_of_range,
+            motion,
+        )
+
+    def _keyframe_due(self, odom, points, pred) -> bool:
+        due = self.selector.due(odom) or self._keyframe_requested
+        if not due and self.cfg.keyframe_novelty > 0 and self.map.cells:
+            due = self.selector.moved(odom, NOVELTY_MIN_STEP) and self._sees_new_space(points, pred)
+        return due
+
+    def _track(self, pred, odom, points) -> SlamStep:
+        """A scan that is no keyframe: the pose by odometry, its evidence counted."""
+        self.pose, self.odom = pred, odom
+        if self.evidence is not None and len(self.graph):  # seen from its keyframe
+            node = len(self.graph) - 1
+            self.evidence.add(node, self.graph.poses[node], relative(self._kf_pose, pred), points)
+        if self.keep_trajectory:  # as seen from its keyframe, to follow corrections
+            self._steps.append((len(self.graph) - 1, relative(self._kf_pose, pred)))
+        return SlamStep(pred, False)
+
+    def _match(self, points, pred, blobs_m: float, range_m: float):
+        """ICP (refined on the evidence) of the keyframe's returns: the result (None
+        without a reference), the pose, and the returns it used."""
+        res, pose = None, pred
+        aligned = points.valid
+        if blobs_m > 0:
+            blobs = isolated_blobs(points, blobs_m)
+            self.blob_returns_skipped += int(blobs.sum())
+            aligned = aligned & ~blobs
+        valid = points.xy[aligned]
+        if len(valid) and (self.store or self.map.cells):
+            res = self._align(valid, pred, points.origin)
+            if self.evidence is not None and res.inliers > 0:
+                res = self._refine_on_evidence(res, valid, range_m)
+            pose = res.pose if res.inliers > 0 else pred
+            self.degenerate_keyframes += res.degenerate_axis is not None
+        return res, pose, valid
+
+    def _keyframe_polygon(self, scan: LaserScan, points, pose):
         seen = points
         if self.evidence is not None:
             node = len(self.graph) - 1
             self.evidence.add(node, pose, np.zeros(3), points)
-            ev = self.cfg.evidence
             seen = view_points(
                 self.evidence.grid,
                 points,
@@ -392,22 +435,19 @@ class PolySlam:
                 len(scan.ranges),
                 scan.range_max,
                 self.cfg.frontier_range_m,
-                ev.oversample,
+                self.cfg.evidence.oversample,
             )
-        kf = keyframe_polygon(seen, pose, self.cfg.obstacle_max_gap_m, self.cfg.obstacle_gap_beams)
-        t["polygon"] = time.perf_counter()
-        # 6. refinement by line fitting (always a valid simple polygon)
-        kf, how = refine_polygon(kf, self.cfg.refine)
-        t["refine"] = time.perf_counter()
-        # 7. merge into the robot's map, its vertices on the wire's grid; the changed cells
-        # are the delta, and the merge itself is a smaller one
-        # (after a correction, the delta starts before it)
-        base, op = self.map.version, None
-        correction, self._correction = self._correction, None
-        if correction is not None or anchor_base is not None:
-            base = start_version
+        return keyframe_polygon(
+            seen, pose, self.cfg.obstacle_max_gap_m, self.cfg.obstacle_gap_beams
+        )
+
+    def _merge(self, kf, pose) -> MergeOp | None:
+        """The keyframe merged into the map (trimmed, snapped); the merge as a replayable
+        operation, or None. A keyframe that fails to merge is counted and logged, never
+        skipped silently; its pose is still tracked."""
         news = trim_keyframe(kf, self.map, self.merge_options) if self.cfg.trim_merges else kf
         snapped = snap_polygon(news, self._quantum_u) if self._quantum_u else None
+        op = None
         try:
             before = self.map.version
             merged = self.map.merge(news if snapped is None else snapped, self.merge_options)
@@ -428,16 +468,15 @@ class PolySlam:
                     self.atlas.add(kid, snapped, self.merge_options)
                     # the atlas holds it at a frame of its own: seen from the keyframe
                     self._frames[kid] = relative(pose, pose_of(self.atlas.poses[kid]))
-        except PolyswarmError as e:  # never silently: counted, logged, pose still tracked
+        except PolyswarmError as e:
             self.rejected_keyframes += 1
             log.warning("keyframe %d not merged: %s", self.keyframes, e)
-        if anchor_base is not None and correction is None:
-            op = None  # a map moved as cells: receivers take the cells, not a replay
-        t["merge"] = time.perf_counter()
+        return op
+
+    def _keyframe_done(self, pose, kf, odom, pinned: bool) -> None:
         self.store.add(pose, kf)
         if self.keep_trajectory:
             self._steps.append((len(self.graph) - 1, np.zeros(3)))
-        delta = self.map.delta_since(base) if self.map.version != base else None
         self.pose = np.array([pose[0], pose[1], float(wrap(pose[2]))])
         self._kf_pose, self._kf_odom = self.pose.copy(), odom
         self._kf_pinned = pinned
@@ -445,15 +484,6 @@ class PolySlam:
         self.selector.mark(odom)
         self._keyframe_requested = False
         self.keyframes += 1
-        names = ["points", "icp", "loop", "polygon", "refine", "merge"]
-        prev, ms = t["start"], {}
-        for name in names:
-            ms[name] = (t[name] - prev) * 1e3
-            prev = t[name]
-        ms["total"] = (t["merge"] - t["start"]) * 1e3
-        return SlamStep(
-            self.pose.copy(), True, delta, op, correction, res, how, ms, anchor_base is not None
-        )
 
     def _sees_new_space(self, points, pose) -> bool:
         """Do ``keyframe_novelty`` of the scan's beams end (pulled back by
@@ -689,3 +719,14 @@ class PolySlam:
                     self.rejected_keyframes += 1
                     log.warning("keyframe %d not merged into the rebuilt map: %s", k, e)
         return pmap
+
+
+def _stage_ms(t: dict[str, float]) -> dict[str, float]:
+    """Milliseconds of each stage (``t``: the clock after each) and in all."""
+    names = ["points", "icp", "loop", "polygon", "refine", "merge"]
+    prev, ms = t["start"], {}
+    for name in names:
+        ms[name] = (t[name] - prev) * 1e3
+        prev = t[name]
+    ms["total"] = (t["merge"] - t["start"]) * 1e3
+    return ms
