@@ -139,79 +139,109 @@ def save_state(sim: Simulation, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def _loop(
-    sim, bus, buses, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s, saved=None
-) -> None:
-    alive: set[tuple[str, str]] = set()
-    acked = dict.fromkeys(ids, -1)  # last scan seq each agent has acknowledged
-    sent: dict[str, list[tuple[int, float]]] = {rid: [] for rid in ids}  # (seq, t) unacked
-    sent_wall: dict[str, dict[int, float]] = {rid: {} for rid in ids}  # seq -> wall time
-    last_cmd_t = dict.fromkeys(ids, -math.inf)
+class _Lockstep:
+    """The simulator's side of the agents' acknowledgements: who is alive, which scans
+    each agent has not acknowledged yet, when each robot last got a command."""
 
-    def drain(timeout: float = 0.0) -> None:
-        for item in bus.poll(timeout_s=timeout):
+    def __init__(self, sim, bus, keys: SwarmKeys, ids: list[str], index: dict) -> None:
+        self.sim, self.bus, self.keys, self.ids, self.index = sim, bus, keys, ids, index
+        self.alive: set[tuple[str, str]] = set()
+        self.acked = dict.fromkeys(ids, -1)  # last scan seq each agent has acknowledged
+        self.sent: dict[str, list[tuple[int, float]]] = {r: [] for r in ids}  # (seq, t) unacked
+        self.sent_wall: dict[str, dict[int, float]] = {r: {} for r in ids}  # seq -> wall time
+        self.last_cmd_t = dict.fromkeys(ids, -math.inf)
+
+    def drain(self, timeout: float = 0.0) -> None:
+        """Liveliness changes and velocity commands received (with their acks)."""
+        for item in self.bus.poll(timeout_s=timeout):
             change = is_alive_change(item)
             if change is not None:
-                who = keys.alive_name(item.key)
+                who = self.keys.alive_name(item.key)
                 if who is not None:
-                    (alive.add if change else alive.discard)(who)
-                    if who[0] == "agent" and who[1] in sent:
+                    (self.alive.add if change else self.alive.discard)(who)
+                    if who[0] == "agent" and who[1] in self.sent:
                         # a (re)started or lost agent owes no acknowledgements
-                        sent[who[1]] = []
-                        acked[who[1]] = -1
+                        self.sent[who[1]] = []
+                        self.acked[who[1]] = -1
                 continue
-            rid = keys.robot_of(item.key)
-            if rid not in index:
+            rid = self.keys.robot_of(item.key)
+            if rid not in self.index:
                 continue
             msg: CmdVel = item.msg
-            sim.set_cmd(index[rid], msg.v_mps, msg.w_radps)
-            last_cmd_t[rid] = sim.time
-            if msg.ack > acked[rid]:
-                acked[rid] = msg.ack
-                sent[rid] = [(s, t) for s, t in sent[rid] if s > msg.ack]
-                sent_wall[rid] = {s: w for s, w in sent_wall[rid].items() if s > msg.ack}
+            self.sim.set_cmd(self.index[rid], msg.v_mps, msg.w_radps)
+            self.last_cmd_t[rid] = self.sim.time
+            if msg.ack > self.acked[rid]:
+                self.acked[rid] = msg.ack
+                self.sent[rid] = [(s, t) for s, t in self.sent[rid] if s > msg.ack]
+                self.sent_wall[rid] = {s: w for s, w in self.sent_wall[rid].items() if s > msg.ack}
 
-    # wait for the processes that must be up before time starts
+    def forget_lost(self) -> None:
+        """A scan unacknowledged for ``ACK_TIMEOUT_S`` of wall time was lost on the way:
+        the agent acknowledges later scans only if it is sent some."""
+        now_wall = time.monotonic()
+        for rid in self.ids:
+            sent, wall = self.sent[rid], self.sent_wall[rid]
+            if sent and now_wall - wall.get(sent[0][0], now_wall) > ACK_TIMEOUT_S:
+                lost = sent.pop(0)
+                wall.pop(lost[0], None)
+                log.debug("scan %d of %s never acknowledged: treated as lost", lost[0], rid)
+
+    def lagging(self, max_lag_s: float) -> list[str]:
+        """Live agents more than ``max_lag_s`` of simulated time behind."""
+        return [
+            rid
+            for rid in self.ids
+            if ("agent", rid) in self.alive
+            and self.sent[rid]
+            and self.sim.time - self.sent[rid][0][1] > max_lag_s
+        ]
+
+    def stop_quiet_robots(self) -> None:
+        """A robot whose agent went quiet stops."""
+        for rid in self.ids:
+            if self.sim.time - self.last_cmd_t[rid] > CMD_TIMEOUT_S:
+                self.sim.set_cmd(self.index[rid], 0.0, 0.0)
+
+    def sent_scan(self, rid: str, seq: int, t: float) -> None:
+        if ("agent", rid) in self.alive:
+            self.sent[rid].append((seq, t))
+            self.sent_wall[rid][seq] = time.monotonic()
+
+
+def _wait_for(ls: _Lockstep, stop, wait_for: tuple[str, ...]) -> None:
+    """Until the processes that must be up before time starts are."""
     need = set()
     if "agents" in wait_for:
-        need |= {("agent", rid) for rid in ids}
+        need |= {("agent", rid) for rid in ls.ids}
     if "coordinator" in wait_for:
         need.add(("coordinator", "coordinator"))
     t_wait = time.monotonic()
-    while not stop.is_set() and not need <= alive:
-        drain(0.1)
+    while not stop.is_set() and not need <= ls.alive:
+        ls.drain(0.1)
         if time.monotonic() - t_wait > STALL_WARN_S:
-            log.warning("waiting for %s", sorted(n for _, n in need - alive))
+            log.warning("waiting for %s", sorted(n for _, n in need - ls.alive))
             t_wait = time.monotonic()
+
+
+def _loop(
+    sim, bus, buses, keys, ids, index, stop, speed, max_lag_s, wait_for, duration_s, saved=None
+) -> None:
+    ls = _Lockstep(sim, bus, keys, ids, index)
+    _wait_for(ls, stop, wait_for)
     log.info("simulation starts: %d robots, speed %.1fx", len(ids), speed)
     wall0, sim0 = time.monotonic(), sim.time
     last_clock = (time.monotonic(), sim.time)
     stall_t = None
     while not stop.is_set() and sim.time < duration_s:
-        drain()
-        # a scan unacknowledged for ACK_TIMEOUT_S of wall time was lost on the way: the
-        # agent acknowledges later scans only if it is sent some
-        now_wall = time.monotonic()
-        for rid in ids:
-            if (
-                sent[rid]
-                and now_wall - sent_wall[rid].get(sent[rid][0][0], now_wall) > ACK_TIMEOUT_S
-            ):
-                lost = sent[rid].pop(0)
-                sent_wall[rid].pop(lost[0], None)
-                log.debug("scan %d of %s never acknowledged: treated as lost", lost[0], rid)
-        # keep pace with the slowest live agent
-        lagging = [
-            rid
-            for rid in ids
-            if ("agent", rid) in alive and sent[rid] and sim.time - sent[rid][0][1] > max_lag_s
-        ]
+        ls.drain()
+        ls.forget_lost()
+        lagging = ls.lagging(max_lag_s)  # keep pace with the slowest live agent
         if lagging:
             stall_t = stall_t or time.monotonic()
             if time.monotonic() - stall_t > STALL_WARN_S:
                 log.warning("agents %s are behind; waiting", lagging)
                 stall_t = time.monotonic()
-            drain(0.005)
+            ls.drain(0.005)
             wall0, sim0 = time.monotonic(), sim.time  # do not rush to catch up afterwards
             continue
         stall_t = None
@@ -219,36 +249,36 @@ def _loop(
         if speed > 0:
             ahead = (sim.time - sim0) / speed - (time.monotonic() - wall0)
             if ahead > 0:
-                drain(min(ahead, 0.05))
+                ls.drain(min(ahead, 0.05))
                 continue
-        for rid in ids:  # a robot whose agent went quiet stops
-            if sim.time - last_cmd_t[rid] > CMD_TIMEOUT_S:
-                sim.set_cmd(index[rid], 0.0, 0.0)
+        ls.stop_quiet_robots()
         events = sim.step()
         if not events:
             continue
-        t = sim.time
-        for ev in events:
-            rid = ids[ev.robot]
-            r = sim.robots[ev.robot]
-            o = ev.odom
-            link = buses[rid]
-            link.publish(
-                keys.robot(rid).odom, Odometry(float(o[0]), float(o[1]), float(o[2]), r.v, r.w), t
-            )
-            # stamped with its first beam
-            link.publish(keys.robot(rid).scan, Scan.from_laserscan(ev.scan), ev.scan.stamp)
-            if ("agent", rid) in alive:
-                seq = link.last_seq(keys.robot(rid).scan)
-                sent[rid].append((seq, t))
-                sent_wall[rid][seq] = time.monotonic()
-        poses = {rid: tuple(float(v) for v in sim.robots[k].pose) for rid, k in index.items()}
-        walls = sum(r.wall_collisions for r in sim.robots)
-        robots = sum(r.robot_collisions for r in sim.robots)
-        bus.publish(keys.truth, Truth(poses, walls, robots), t)
+        _publish(sim, ls, bus, buses, keys, ids, index, events)
         now = time.monotonic()
-        achieved = (t - last_clock[1]) / max(now - last_clock[0], 1e-9)
-        last_clock = (now, t) if now - last_clock[0] > 1.0 else last_clock
-        bus.publish(keys.clock, Clock(t, float(np.clip(achieved, 0, 1e6))), t)
+        achieved = (sim.time - last_clock[1]) / max(now - last_clock[0], 1e-9)
+        last_clock = (now, sim.time) if now - last_clock[0] > 1.0 else last_clock
+        bus.publish(keys.clock, Clock(sim.time, float(np.clip(achieved, 0, 1e6))), sim.time)
         if saved is not None:  # after publishing: a resumed simulator starts one scan later
             save_state(sim, saved)
+
+
+def _publish(sim, ls: _Lockstep, bus, buses, keys, ids, index, events) -> None:
+    """Each robot's odometry and scan on its link, and the ground truth."""
+    t = sim.time
+    for ev in events:
+        rid = ids[ev.robot]
+        r = sim.robots[ev.robot]
+        o = ev.odom
+        link = buses[rid]
+        link.publish(
+            keys.robot(rid).odom, Odometry(float(o[0]), float(o[1]), float(o[2]), r.v, r.w), t
+        )
+        # stamped with its first beam
+        link.publish(keys.robot(rid).scan, Scan.from_laserscan(ev.scan), ev.scan.stamp)
+        ls.sent_scan(rid, link.last_seq(keys.robot(rid).scan), t)
+    poses = {rid: tuple(float(v) for v in sim.robots[k].pose) for rid, k in index.items()}
+    walls = sum(r.wall_collisions for r in sim.robots)
+    robots = sum(r.robot_collisions for r in sim.robots)
+    bus.publish(keys.truth, Truth(poses, walls, robots), t)
