@@ -555,10 +555,7 @@ def launch(
     stop: threading.Event | None = None,
 ) -> LaunchResult:
     world, cfg, out = prepare(opts)
-    keys = SwarmKeys(cfg.comms.swarm)
     ids = [r.id for r in cfg.robots]
-    conf = str(out / "config.toml")
-    logs = out / "logs"
     stop = stop or threading.Event()
     children: list[Child] = []
     obs = Observer(world, cfg, ids)
@@ -566,60 +563,12 @@ def launch(
     t0 = time.monotonic()
     error: str | None = None
     net = _network(opts, ids, out)
-    hosts = netns.Hosts(net, cfg.comms.endpoint)
     try:
-        # a router of its own: the others keep talking while the coordinator restarts
-        children.append(_spawn("router", ["router", "--listen", hosts.root], logs, False))
-        faulty = {"POLYSWARM_LINK_FAULTS": opts.link_faults} if opts.link_faults else {}
-        wrong = {"POLYSWARM_WRONG_ANCHOR": opts.wrong_anchor} if opts.wrong_anchor else {}
-        children.append(
-            _spawn(
-                "coordinator",
-                ["coordinator", "--config", conf, *hosts.coordinator_args()],
-                logs,
-                opts.verbose,
-                faulty | wrong,
-                wrap=hosts.wrap("coordinator"),
-            )
-        )
-        for name in _standbys(opts):
-            args = ["coordinator", "--config", conf, "--name", name, "--standby"]
-            args += hosts.coordinator_args(name)
-            children.append(_spawn(name, args, logs, opts.verbose, faulty, wrap=hosts.wrap(name)))
-        sim_args = [
-            "sim",
-            "--serve",
-            "--config",
-            conf,
-            "--world",
-            opts.world,
-            "--seed",
-            str(opts.seed),
-        ]
-        sim_args += ["--speed", str(opts.speed), "--wait-coordinator", *hosts.sim_args(ids)]
-        sim_args += ["--gui"] if opts.gui else []
-        nice = opts.robots_nice
-        children.append(_spawn("sim", sim_args, logs, opts.verbose, nice=nice))
-        for rid in ids:
-            agent_args = ["agent", "--id", rid, "--config", conf, *hosts.agent_args(rid)]
-            children.append(
-                _spawn(rid, agent_args, logs, opts.verbose, faulty, nice, hosts.wrap(rid))
-            )
-        if opts.view_port is not None:
-            view_args = ["view", "--config", conf, "--connect", cfg.comms.endpoint]
-            view_args += ["--port", str(opts.view_port), "--stats", str(logs / "view.json")]
-            children.append(_spawn(VIEW, view_args, logs, False))
+        _start(children, opts, cfg, netns.Hosts(net, cfg.comms.endpoint), ids, out)
         with open_session(SessionSpec.client(cfg.comms.endpoint)) as session:
             bus = Bus(session, "observer")
             try:
-                bus.subscribe(keys.clock, Clock)
-                bus.subscribe(keys.truth, Truth)
-                bus.subscribe(keys.coordinator_status, CoordinatorStatus)
-                bus.subscribe(keys.merged_delta, MapChunk)
-                bus.subscribe(keys.all_robots("status"), RobotStatus)
-                bus.subscribe(keys.all_robots("pose"), Pose)
-                bus.subscribe(keys.all_robots("map/delta"), MapChunk)
-                bus.subscribe(keys.all_anchors, Anchor)
+                keys = _listen(bus, cfg)
                 error = _watch(bus, keys, obs, opts, children, stop, progress, t0, sup, net)
                 obs.sample_memory(children, time.monotonic() - t0)  # as the run ended
                 if error != "interrupted":
@@ -630,17 +579,9 @@ def launch(
         codes, running = _stop_children(children)
         if net is not None:
             net.remove()
-    wall = time.monotonic() - t0
-    injected = {f.target for f in opts.faults if f.action == FaultAction.KILL}
-    crashed = {
-        k: v
-        for k, v in codes.items()
-        if v not in (0, -signal.SIGTERM, 130)
-        and not ((k in injected or k in running) and v == -signal.SIGKILL)
-    }
-    m = obs.metrics(wall, opts)
+    m = obs.metrics(time.monotonic() - t0, opts)
     m["exit_codes"] = codes
-    m["crashed_processes"] = sorted(crashed)
+    m["crashed_processes"] = _crashed(opts, codes, running)
     m["restarts"] = dict(sup.restarts)  # children restarted after exiting unexpectedly
     m["stopped_because"] = error or "unknown"
     if opts.coordinators > 1:
@@ -653,6 +594,60 @@ def launch(
     m["profile"] = cfg.profile
     _write_outputs(out, obs, m, cfg.map.whole_map_precision_m)
     return LaunchResult(out, m, obs.merged)
+
+
+def _start(children: list[Child], opts: LaunchOptions, cfg: Config, hosts, ids, out: Path):
+    """The router, the coordinators, the simulator, the agents and the view, each on
+    its host (``hosts``), appended to ``children`` as they start."""
+    conf, logs = str(out / "config.toml"), out / "logs"
+    # a router of its own: the others keep talking while the coordinator restarts
+    children.append(_spawn("router", ["router", "--listen", hosts.root], logs, False))
+    faulty = {"POLYSWARM_LINK_FAULTS": opts.link_faults} if opts.link_faults else {}
+    wrong = {"POLYSWARM_WRONG_ANCHOR": opts.wrong_anchor} if opts.wrong_anchor else {}
+    args = ["coordinator", "--config", conf, *hosts.coordinator_args()]
+    wrap = hosts.wrap("coordinator")
+    children.append(_spawn("coordinator", args, logs, opts.verbose, faulty | wrong, wrap=wrap))
+    for name in _standbys(opts):
+        args = ["coordinator", "--config", conf, "--name", name, "--standby"]
+        args += hosts.coordinator_args(name)
+        children.append(_spawn(name, args, logs, opts.verbose, faulty, wrap=hosts.wrap(name)))
+    sim_args = ["sim", "--serve", "--config", conf, "--world", opts.world]
+    sim_args += ["--seed", str(opts.seed), "--speed", str(opts.speed), "--wait-coordinator"]
+    sim_args += [*hosts.sim_args(ids), *(["--gui"] if opts.gui else [])]
+    nice = opts.robots_nice
+    children.append(_spawn("sim", sim_args, logs, opts.verbose, nice=nice))
+    for rid in ids:
+        agent_args = ["agent", "--id", rid, "--config", conf, *hosts.agent_args(rid)]
+        children.append(_spawn(rid, agent_args, logs, opts.verbose, faulty, nice, hosts.wrap(rid)))
+    if opts.view_port is not None:
+        view_args = ["view", "--config", conf, "--connect", cfg.comms.endpoint]
+        view_args += ["--port", str(opts.view_port), "--stats", str(logs / "view.json")]
+        children.append(_spawn(VIEW, view_args, logs, False))
+
+
+def _listen(bus, cfg: Config) -> SwarmKeys:
+    """The observer's subscriptions: everything the swarm says, nothing it is told."""
+    keys = SwarmKeys(cfg.comms.swarm)
+    bus.subscribe(keys.clock, Clock)
+    bus.subscribe(keys.truth, Truth)
+    bus.subscribe(keys.coordinator_status, CoordinatorStatus)
+    bus.subscribe(keys.merged_delta, MapChunk)
+    bus.subscribe(keys.all_robots("status"), RobotStatus)
+    bus.subscribe(keys.all_robots("pose"), Pose)
+    bus.subscribe(keys.all_robots("map/delta"), MapChunk)
+    bus.subscribe(keys.all_anchors, Anchor)
+    return keys
+
+
+def _crashed(opts: LaunchOptions, codes: dict, running: set[str]) -> list[str]:
+    """Children that died for good: not stopped by the launch, not killed on purpose."""
+    injected = {f.target for f in opts.faults if f.action == FaultAction.KILL}
+    return sorted(
+        k
+        for k, v in codes.items()
+        if v not in (0, -signal.SIGTERM, 130)
+        and not ((k in injected or k in running) and v == -signal.SIGKILL)
+    )
 
 
 def _network(opts: LaunchOptions, ids: list[str], out: Path):
