@@ -162,7 +162,8 @@ def test_observer_clips_the_mazes_ground_truth_cell_by_cell(tmp_path):
     whole."""
     import shapely
 
-    from polyswarm.runners.launch import LaunchOptions, Observer, _clip, prepare
+    from polyswarm.runners.launch import LaunchOptions, prepare
+    from polyswarm.runners.observer import Observer, _clip
 
     world, cfg, _ = prepare(LaunchOptions(world="data:maze", robots=10, out=tmp_path))
     free = Observer(world, cfg, [r.id for r in cfg.robots]).truth_free
@@ -186,7 +187,8 @@ def test_a_start_told_off_is_told_so_and_the_robot_stands_where_it_really_is(tmp
     import pytest
 
     from polyswarm.errors import PolyswarmError
-    from polyswarm.runners.launch import LaunchOptions, Observer, prepare
+    from polyswarm.runners.launch import LaunchOptions, prepare
+    from polyswarm.runners.observer import Observer
     from polyswarm.se2 import compose
 
     world, cfg, _ = prepare(
