@@ -41,28 +41,23 @@ import numpy as np
 
 from agents.allocation import STALLED_M, STALLED_WEIGHT, TargetAllocation
 from agents.meeting import Meetings
-from agents.merger import Merged, MergeJob, MergeLostError, MergeProcess, merge_step
-from agents.replay import Replayed, ReplayPool
+from agents.merger import MergeJob, MergeProcess
+from agents.merging import MergeSchedule
+from agents.replay import ReplayPool
+from agents.robotmaps import RobotMaps
 from polyswarm.config import Config
-from polyswarm.errors import DeltaGapError, MapError
+from polyswarm.errors import MapError
 from polyswarm.explore.assign import GraphIndex, Reach, Strategy
 from polyswarm.explore.targets import Sensor, Target, TargetCache
 from polyswarm.frames.jointgraph import KeyframeLedger
-from polyswarm.frames.sighting import SIGHTING_SLACK_M
 from polyswarm.nav.navgraph import NavGraph
-from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp, MergeOptions
-from polyswarm.slam.follow import Atlas, CorrectionOp, largest_move_m, replay_correction
-from protocols.mapcodec import (
-    decode_correction,
-    decode_delta,
-    decode_merge,
-)
+from polyswarm.polymap import GridPolyMap, MapDelta, MergeOptions
+from polyswarm.slam.follow import Atlas
 from protocols.messages import (
     MAX_STATUS_POINTS,
     Assignment,
     AssignmentKind,
     CoordinatorStatus,
-    MapKind,
     MissionState,
     Pose,
     RobotState,
@@ -80,14 +75,6 @@ END_CONFIRM_CYCLES = 3
 # robots whose frames are not found hold the end of the exploration this long (simulated
 # s) after the last frontier: matches every 5 s need a few more views of a shared place
 FRAME_WAIT_S = 120.0
-MERGE_PERIOD_S = 1.0  # robots' changed cells are merged at least this often (batched)
-# at the end of a run, the replay pool's last updates are waited for this long (s): with
-# 25 robots on one replay process its results ran 1.7 s behind (p95, bench cycle)
-DRAIN_TIMEOUT_S = 10.0
-# a merge of robots' cells waits this long at most for the replays on their way (s).
-# Merging without them cost coverage in 4 of 4 maze runs (at 150 s: 58 -> 45 %, 45 ->
-# 41 %): a robot's latest view missed the merge by a replay's time, then waited a period
-FLUSH_WAIT_S = 0.5
 
 
 @dataclass
@@ -134,7 +121,7 @@ class Outgoing:
     status: CoordinatorStatus | None = None
 
 
-class Coordinator(TargetAllocation):
+class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
     """The swarm's map and plan. With a ``ReplayPool`` (``agents.replay``), robots'
     merges and corrections are replayed on its worker processes, and ``collect()``
     brings in what they changed; without one, on the calling thread."""
@@ -324,356 +311,6 @@ class Coordinator(TargetAllocation):
             info.reached_t = stamp_s
         self._wake = True
 
-    def on_robot_delta(self, rid: str, stamp_s: float, delta: MapDelta) -> None:
-        """Apply a robot's delta to its copy of the robot's map; its cells are merged at
-        the next ``flush``.
-
-        Raises DeltaGapError when the robot's delta does not apply (fetch its map)."""
-        self.now = max(self.now, stamp_s)
-        info = self.robot(rid)
-        if self.pool is not None:  # in order behind the robot's merges
-            return self._to_pool(info, "delta", delta, stamp_s)
-        if info.map is None:
-            if delta.base_version > 0:
-                raise _gap(rid, delta)
-            info.map = GridPolyMap(delta.cell_size)
-        with self.timed("deltas"):
-            info.map = info.map.apply_delta(delta)
-        self.applied_deltas += 1
-        self._check_behind(info)
-        self._pending.setdefault(rid, set()).update(c.index for c in delta.cells)
-
-    def on_robot_merge(self, rid: str, stamp_s: float, op: MergeOp) -> MapDelta | None:
-        """Replay a robot's merge on the copy of its map (bit-identical by construction);
-        the cells it changed as a delta (for the journal), or None if it was old.
-
-        Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
-        self.now = max(self.now, stamp_s)
-        info = self.robot(rid)
-        if op.keyframe is not None and op.keyframe not in info.ledger.keyframes:
-            info.ledger.merged(op.keyframe, op.polygon)
-        if self.pool is not None:
-            return self._to_pool(info, "merge", op, stamp_s)
-        if info.map is None:
-            if op.base_version > 0:
-                raise DeltaGapError(f"first merge of {rid} starts at version {op.base_version}")
-            info.map = GridPolyMap(op.cell_size)
-        c0 = time.thread_time()
-        with self.timed("replay"):
-            res = info.map.replay(op)
-        self.replay_cpu_ms.append((time.thread_time() - c0) * 1e3)
-        if op.keyframe is not None:
-            info.atlas.add(op.keyframe, op.polygon, op.options)
-        if not res.changed:
-            return None
-        info.map = res.map
-        self.replayed_merges += 1
-        self._check_behind(info)
-        self._pending.setdefault(rid, set()).update(res.changed)
-        changed = tuple(res.map.cells[i] for i in sorted(res.changed))
-        return MapDelta(op.cell_size, op.base_version, op.version, changed)
-
-    def on_robot_correction(self, rid: str, stamp_s: float, op: CorrectionOp) -> MapDelta:
-        """Replay a robot's correction (keyframes its loop closure moved) on the copy of
-        its map; the cells it changed as a delta (for the journal). The merged map's
-        cells it changed are merged afresh at the next ``flush``.
-
-        Raises DeltaGapError when it does not apply or replays differently (fetch its map)."""
-        self.now = max(self.now, stamp_s)
-        info = self.robot(rid)
-        info.ledger.corrected(op.moves)
-        if self.pool is not None:
-            return self._to_pool(info, "correct", op, stamp_s)
-        if info.map is None:
-            raise DeltaGapError(f"correction of {rid} before any of its map")
-        with self.timed("replay"):
-            info.map, info.atlas, changed = replay_correction(info.map, info.atlas, op)
-        self._corrected(info, stamp_s, largest_move_m(op), {c.index for c in changed})
-        return MapDelta(op.cell_size, op.base_version, op.version, tuple(changed))
-
-    def _corrected(self, info: RobotInfo, stamp_s: float, moved_m: float, idxs: set) -> None:
-        self.corrections += 1
-        if moved_m > SIGHTING_SLACK_M:
-            info.corrected_s = stamp_s
-        self._check_behind(info)
-        self._pending.setdefault(info.id, set()).update(idxs)
-        self._rebuild |= idxs
-
-    def _to_pool(self, info: RobotInfo, kind: str, op, stamp_s: float) -> None:
-        """Send an update to the robot's replay worker; ``collect`` brings in its cells."""
-        with self.timed("replay"):
-            self.pool.update(info.id, info.epoch, kind, op, stamp_s)
-        info.inflight += 1
-        info.queued = max(info.queued, op.version)
-
-    def _set_map(self, info: RobotInfo, pmap: GridPolyMap | None, atlas: Atlas | None = None):
-        """The robot's map copy replaced whole (and its atlas, if given; else kept)."""
-        info.map = pmap
-        if self.pool is None:
-            if atlas is not None:
-                info.atlas = atlas
-            return
-        info.epoch += 1  # updates on their way were for the map replaced
-        info.inflight = 0
-        with self.timed("replay"):
-            self.pool.set_map(info.id, info.epoch, pmap, atlas)
-
-    def use_pool(self, pool: ReplayPool) -> ReplayPool:
-        """Replay robots' updates on ``pool`` from now on (the maps held go to it)."""
-        self.pool = pool
-        for info in self.robots.values():
-            if info.map is not None:
-                self._set_map(info, info.map, info.atlas)
-        return pool
-
-    def take_in(self) -> list[tuple[str, MapDelta | MapError]]:
-        """``collect``, or when a merge is due ``drain`` for up to ``FLUSH_WAIT_S``: a
-        robot's latest view must not miss the merge by a replay's time."""
-        return self.drain(FLUSH_WAIT_S) if self._merge_due() else self.collect()
-
-    def drain(self, timeout_s: float = DRAIN_TIMEOUT_S) -> list[tuple[str, MapDelta | MapError]]:
-        """``collect`` until the pool has replayed every update sent to it (or
-        ``timeout_s`` passed)."""
-        out: list[tuple[str, MapDelta | MapError]] = []
-        if self.pool is None:
-            return out
-        deadline = time.monotonic() + timeout_s
-        with self.timed("collect"):  # waiting delays the cycle as much as working
-            out += self.collect()
-            while any(r.inflight for r in self.robots.values()):
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    log.warning("replay processes still busy after %.1f s", timeout_s)
-                    break
-                out += self.collect(wait_s=min(left, 0.1))
-        return out
-
-    def collect(self, wait_s: float = 0.0) -> list[tuple[str, MapDelta | MapError]]:
-        """What the replay pool finished since the last call, applied to the robots' map
-        copies (their cells are merged at the next ``flush``): per update, the cells it
-        changed (for the journal) or the MapError that asks for the robot's map. Robots
-        whose worker died are given their maps again (their atlases are lost with it, as
-        on a restart of the coordinator: their next correction fetches the map).
-        ``wait_s``: how long to wait for a first result when none is there."""
-        if self.pool is None:
-            return []
-        out: list[tuple[str, MapDelta | MapError]] = []
-        with self.timed("collect"):
-            done, lost = self.pool.poll(wait_s)
-            for r in done:
-                if r.rid not in self.robots:  # withdrawn (``withdraw``) since it was sent
-                    continue
-                got = self._collected(r)
-                if got is not None:
-                    out.append((r.rid, got))
-            for rid in lost:
-                if rid in self.robots:
-                    self._set_map(self.robots[rid], self.robots[rid].map)
-        return out
-
-    def _collected(self, r: Replayed) -> MapDelta | MapError | None:
-        info = self.robot(r.rid)
-        if r.epoch != info.epoch:  # sent before its map was replaced
-            return None
-        info.inflight = max(0, info.inflight - 1)
-        self.worker_replay_cpu_ms.append(r.cpu_ms)
-        self.replay_lag_ms.append((time.perf_counter() - r.sent_s) * 1e3)
-        self.now = max(self.now, r.stamp_s)
-        if r.error is not None:
-            info.epoch += 1  # what is still on its way fails the same: drop it
-            info.inflight = 0
-            self._check_behind(info)
-            return DeltaGapError(f"{r.kind} of {r.rid}: {r.error}")
-        if r.delta is None:
-            return None
-        base = info.map if info.map is not None else GridPolyMap(r.delta.cell_size)
-        info.map = base.apply_delta(r.delta)
-        idxs = {c.index for c in r.delta.cells}
-        if r.kind == "correct":
-            self._corrected(info, r.stamp_s, r.moved_m, idxs)
-        else:
-            self.replayed_merges += r.kind == "merge"
-            self.applied_deltas += r.kind == "delta"
-            self._check_behind(info)
-            self._pending.setdefault(r.rid, set()).update(idxs)
-        return r.delta
-
-    def on_robot_update(self, rid: str, stamp_s: float, kind: MapKind, wire: bytes):
-        """A robot's map update as its MapChunk carried it: decoded and applied; for a
-        merge or a correction the cells it changed (or None), for cells the delta itself.
-        With a replay pool it is only sent there: None (``collect`` has the outcome).
-
-        Raises DecodeError on bad bytes, MapError (DeltaGapError) when it does not apply."""
-        with self.timed("decode"):
-            if kind == MapKind.MERGE:
-                op = decode_merge(wire)
-            elif kind == MapKind.CORRECT:
-                op = decode_correction(wire)
-            else:
-                op = decode_delta(wire)
-        if kind == MapKind.MERGE:
-            return self.on_robot_merge(rid, stamp_s, op)
-        if kind == MapKind.CORRECT:
-            return self.on_robot_correction(rid, stamp_s, op)
-        self.on_robot_delta(rid, stamp_s, op)
-        return op if self.pool is None else None
-
-    def on_robot_map(self, rid: str, pmap: GridPolyMap, atlas: Atlas | None = None) -> None:
-        """A robot's full map (resync, or handed over with its ``atlas`` from exploring
-        alone): nothing it mapped is lost."""
-        info = self.robot(rid)
-        if info.map is not None and info.map.version >= pmap.version:
-            return
-        if info.map is not None:  # corrections missed: cells that lost space are merged afresh
-            old = info.map.cells
-            self._rebuild |= {i for i, c in old.items() if not c.same_content(pmap.cells.get(i))}
-        self._set_map(info, pmap, atlas)
-        if atlas is not None:
-            info.ledger = KeyframeLedger.from_atlas(atlas)
-        self._check_behind(info)
-        self._pending.setdefault(rid, set()).update(pmap.cells)
-
-    def withdraw(self, rid: str, why: str = "") -> RobotInfo:
-        """A robot leaves the swarm's map and plan (its frame was found wrong,
-        ``agents.anchoring``; or, ``why``, it leaves a waiting team's coordinator): the
-        merged cells its copy reached are merged afresh from the other robots' copies at
-        the next flush, its target is free. Its copy, pose and state are returned: nothing
-        it mapped is lost, it goes on in a frame of its own (or another coordinator's)."""
-        info = self.robots.pop(rid)
-        self._pending.pop(rid, None)
-        if info.map is not None:
-            self._rebuild |= set(info.map.cells)
-        if self.pool is not None:  # its worker journals its copy aside (persist)
-            self.pool.drop(rid)
-        self._wake = True
-        if why:
-            log.info("robot %s leaves this coordinator: %s", rid, why)
-        else:
-            log.warning("robot %s withdrawn from the merged map", rid)
-        return info
-
-    def flush_due(self) -> bool:
-        if self.merger is not None and self.merger.ready():
-            return True  # a merge came in: publish it
-        return self._merge_due()
-
-    def _merge_due(self) -> bool:
-        changed = self._pending or self._rebuild or any(r.inflight for r in self.robots.values())
-        busy = self.merger is not None and self.merger.busy
-        return bool(changed) and not busy and self._merge_period_passed()
-
-    def _merge_period_passed(self) -> bool:
-        return self.now - self._last_flush >= MERGE_PERIOD_S
-
-    def flush(self, wait_s: float = 0.0, send: bool = False) -> MapDelta | None:
-        """Merge the robots' cells changed since the last flush; the merged map's delta.
-        With a merge process: apply its last job's result (waiting up to ``wait_s`` for
-        it) and send it the cells changed since, once a merge period passed since the
-        last job or when asked to (``send``, or waiting); the delta is what came in.
-
-        A cell that fails to merge is logged and stays in its robot's map; the robot's
-        next change of it, or a resync, retries it."""
-        base = self.merged.version
-        if self.merger is not None:
-            self._merge_on_process(wait_s, send or wait_s > 0)
-            return None if self.merged.version == base else self.merged.delta_since(base)
-        self._last_flush = self.now
-        if self._pending or self._rebuild:
-            t0, c0 = time.perf_counter(), time.thread_time()
-            self.merged, delta = merge_step(self.merged, self.graph, self._merge_job())
-            if delta is not None:
-                self._index = None
-            self.spent("merge", (time.perf_counter() - t0) * 1e3, (time.thread_time() - c0) * 1e3)
-        return None if self.merged.version == base else self.merged.delta_since(base)
-
-    def _merge_job(self) -> MergeJob:
-        """The robots' cells changed since the last merge, and every robot's cells around
-        the merged cells corrections changed (those are merged afresh: a ghost wall or
-        a frontier a correction closed leaves the merged map too)."""
-        todo, self._rebuild = self._rebuild, set()
-        reach = {(i + di, j + dj) for i, j in todo for di in (-1, 0, 1) for dj in (-1, 0, 1)}
-        rebuild = [
-            r.map.cells[ix]
-            for r in sorted(self.robots.values(), key=lambda r: r.id)
-            if r.map is not None
-            for ix in sorted(reach)
-            if ix in r.map.cells
-        ]
-        cells = []
-        for rid, idxs in sorted(self._pending.items()):
-            m = self.robots[rid].map
-            cells += [m.cells[i] for i in sorted(idxs - todo) if m is not None and i in m.cells]
-        self._pending = {}
-        e = self.cfg.explore
-        facts = (e.min_frontier_length_m, e.max_frontier_length_m, self.sensor)
-        return MergeJob(
-            tuple(cells),
-            frozenset(todo),
-            tuple(rebuild),
-            self._merge_options,
-            facts,
-            time.perf_counter(),
-        )
-
-    def _merge_on_process(self, wait_s: float, send: bool) -> None:
-        """Apply the merge process's result, if in; send it the next job, if any is due.
-        Sent as soon as a result is in, 25 robots kept the process busy all the time:
-        it took the replay process's core and cycles waited for it (18 in 60 s)."""
-        with self.timed("merge"):
-            try:
-                got = self.merger.result(wait_s)
-            except MergeLostError as e:
-                self._merge_here(e)
-                got = None
-            if got is not None:
-                self._take_merge(got)
-            due = self._pending or self._rebuild
-            if due and not self.merger.busy and (send or self._merge_period_passed()):
-                rids = set(self._pending)
-                self._in_merge = (rids, self._merge_job())
-                self.merger.submit(self._in_merge[1])
-                self._last_flush = self.now
-                if wait_s > 0:
-                    self._merge_on_process(wait_s, send)
-
-    def _take_merge(self, got: Merged) -> None:
-        """A merge process's result applied: the merged map, graph, matrix and facts."""
-        try:
-            merged = self.merged.apply_delta(got.delta) if got.delta is not None else None
-        except MapError as e:  # not the map it was sent: never seen, but never lost either
-            self._merge_here(e)
-            return
-        self._in_merge = None
-        self.merger_cpu_ms.append(got.cpu_ms)
-        self.merge_lag_ms.append((time.perf_counter() - got.sent_s) * 1e3)
-        if merged is not None:
-            self.merged = merged
-            self.graph.apply(got.patch)
-            self._index, self._facts = got.index, (self.merged.version, got.facts)
-        self._fresh = True
-
-    def _merge_here(self, why: Exception) -> None:
-        """The job on its way merged on this thread (its result will not come, or does
-        not apply); the merge process starts again from the map here."""
-        log.error("merge process: %s; merging its job here", why)
-        if self._in_merge is not None:
-            self.merged, delta = merge_step(self.merged, self.graph, self._in_merge[1])
-            if delta is not None:
-                self._index = None
-            self._fresh = True
-        self._in_merge = None
-        self.merger.reset(self.merged)
-
-    def use_merger(self, merger: MergeProcess) -> MergeProcess:
-        """Merge on ``merger``'s process from now on (it is given the merged map)."""
-        self.merger = merger
-        merger.reset(self.merged)
-        return merger
-
-    def _unmerged(self, rid: str) -> bool:
-        """Are some of the robot's cells not in the merged map yet?"""
-        return rid in self._pending or (self._in_merge is not None and rid in self._in_merge[0])
-
     def spent(self, stage: str, wall_ms: float, cpu_ms: float) -> None:
         """Work done in the coordinator's thread: counted into the next cycle's time."""
         self._pending_ms += wall_ms
@@ -701,11 +338,6 @@ class Coordinator(TargetAllocation):
         return {k: v / total for k, v in sorted(self.stage_ms.items())} if total else {}
 
     # -- the cycle -------------------------------------------------------------------------
-
-    def _awaiting_merge(self) -> bool:
-        """A merge is on its way and no newer map than the last plan's is in: planning
-        waits for it, as it would for a merge on this thread."""
-        return self.merger is not None and self.merger.busy and not self._fresh
 
     def due(self) -> bool:
         if self._awaiting_merge() and not self.merger.ready():
@@ -839,10 +471,6 @@ class Coordinator(TargetAllocation):
             ", ".join(self.frames_pending),
         )
         return False
-
-
-def _gap(rid: str, delta: MapDelta) -> MapError:
-    return DeltaGapError(f"first delta of {rid} starts at version {delta.base_version}")
 
 
 # --- the process ---------------------------------------------------------------------------------

@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from agents import persist
-from agents.coordinator import DRAIN_TIMEOUT_S, Coordinator
+from agents.coordinator import Coordinator
 from agents.leadership import Leadership
 from agents.merger import MergeProcess
 from agents.replay import ReplayPool
+from agents.robotmaps import DRAIN_TIMEOUT_S
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, MapError, PolyswarmError
 from polyswarm.polymap import MapDelta
