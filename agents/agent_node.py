@@ -172,6 +172,7 @@ class AgentNode:
             self.process_scan(self.waiting.pop(0)[1])
         if self.ros_node is not None:
             self.ros_node.publish_map(agent.planning_map, agent.target_xy)
+            self.ros_node.publish_robots(agent.id, agent.pose, agent.path_left(), agent.peers)
         if self.need_merged and agent.in_shared_frame:
             self._fetch_merged()
 

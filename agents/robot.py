@@ -540,10 +540,10 @@ class RobotAgent:
             self.slam.map.version,
             self.bytes_sent,
             self.stats.distance_m,
-            self._path_left(),
+            self.path_left(),
         )
 
-    def _path_left(self) -> tuple[tuple[float, float], ...]:
+    def path_left(self) -> tuple[tuple[float, float], ...]:
         """The planned path from the robot on, at most MAX_STATUS_PATH_POINTS points (cm)."""
         path = self.follower.path
         if path is None or len(path) == 0:

@@ -36,6 +36,8 @@ MAP_PERIOD_S = 1.0  # the map is published at most this often (map_server latche
 MAP_RESOLUTION_M = 0.05  # the OccupancyGrid's cells: the evidence grid's
 FRONTIER_WIDTH_M = 0.05  # line width of the frontier markers
 SCAN_DEPTH = 50  # sweeps held for the executor: 10 s of a 5 Hz lidar
+ROBOTS_PERIOD_S = 0.5  # the robots' markers at most this often (a pose goes out at 2 Hz)
+ROBOT_MARKER_M = 0.35  # diameter of a robot's marker
 
 
 def _stamp(header) -> float:
@@ -99,6 +101,8 @@ class Ros2Node:
         )
         self.map_pub = self.node.create_publisher(OccupancyGrid, "map", latched)
         self.marker_pub = self.node.create_publisher(MarkerArray, "polyswarm/frontiers", 10)
+        self.robots_pub = self.node.create_publisher(MarkerArray, "polyswarm/robots", 10)
+        self._last_robots_s = -math.inf
         self._cdr_pubs: dict = {}  # (topic template, ROS type) -> publisher
         self._published: tuple | None = None  # (map identity, version) last published
         self._seen: tuple | None = None  # ... and last seen, at wall time _changed_at
@@ -217,6 +221,59 @@ class Ros2Node:
             t.color.b, t.color.a = 0.75, 1.0
             out.markers.append(t)
         return out
+
+    def publish_robots(self, robot_id: str, pose, path, peers: dict, force: bool = False) -> bool:
+        """This robot (a cylinder, an arrow for its heading, the rest of its path) and the
+        robots it last heard of (cylinders at their last positions, named) on
+        ``polyswarm/robots``, at most every ``ROBOTS_PERIOD_S``; whether it was sent."""
+        now = time.monotonic()
+        if not force and now - self._last_robots_s < ROBOTS_PERIOD_S:
+            return False
+        self._last_robots_s = now
+        self.robots_pub.publish(self.robot_markers(robot_id, pose, path, peers))
+        return True
+
+    def robot_markers(self, robot_id: str, pose, path, peers: dict):
+        from geometry_msgs.msg import Point
+        from visualization_msgs.msg import Marker, MarkerArray
+
+        stamp = self.node.get_clock().now().to_msg()
+
+        def marker(kind: int, ns: str, k: int) -> Marker:
+            m = Marker(type=kind, action=Marker.ADD, ns=ns, id=k)
+            m.header.frame_id, m.header.stamp = self.io.map_frame, stamp
+            m.pose.orientation.w = 1.0
+            m.color.a = 1.0
+            return m
+
+        out = []
+        everyone = [(robot_id, (float(pose[0]), float(pose[1])))]
+        everyone += [(rid, (float(xy[0]), float(xy[1]))) for rid, (_, xy) in sorted(peers.items())]
+        for k, (rid, (x, y)) in enumerate(everyone):
+            body = marker(Marker.CYLINDER, "robots", k)
+            body.pose.position.x, body.pose.position.y, body.pose.position.z = x, y, 0.1
+            body.scale.x = body.scale.y = ROBOT_MARKER_M
+            body.scale.z = 0.2
+            body.color.r, body.color.b = (0.9, 0.2) if k == 0 else (0.4, 0.8)
+            name = marker(Marker.TEXT_VIEW_FACING, "names", k)
+            name.pose.position.x, name.pose.position.y, name.pose.position.z = x, y, 0.5
+            name.scale.z, name.text = 0.25, rid
+            name.color.r = name.color.g = name.color.b = 1.0
+            out += [body, name]
+        heading = marker(Marker.ARROW, "heading", 0)
+        x, y, th = (float(v) for v in pose)
+        heading.points = [
+            Point(x=x, y=y),
+            Point(x=x + 0.5 * math.cos(th), y=y + 0.5 * math.sin(th)),
+        ]
+        heading.scale.x, heading.scale.y, heading.scale.z = 0.05, 0.1, 0.1
+        heading.color.r = 0.9
+        route = marker(Marker.LINE_STRIP, "path", 0)
+        route.points = [Point(x=float(px), y=float(py)) for px, py in path]
+        route.scale.x = 0.04
+        route.color.r, route.color.g = 0.9, 0.6
+        out += [heading, route] if len(route.points) > 1 else [heading]
+        return MarkerArray(markers=out)
 
     def close(self) -> None:
         try:

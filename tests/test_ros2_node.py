@@ -20,6 +20,7 @@ from nav_msgs.msg import Odometry as RosOdometry
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan as RosLaserScan
+from visualization_msgs.msg import MarkerArray
 
 from agents.agent_node import run_agent
 from agents.session import SessionSpec, open_session
@@ -84,6 +85,8 @@ def test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node(shared_da
     player.create_subscription(
         OccupancyGrid, "map", lambda m: maps.append((time.monotonic(), m)), latched
     )
+    robots: list[MarkerArray] = []
+    player.create_subscription(MarkerArray, "polyswarm/robots", robots.append, 10)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(player)
     spinner = threading.Thread(target=executor.spin, daemon=True)
@@ -153,3 +156,10 @@ def test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node(shared_da
     assert (got.info.height, got.info.width) == grid.shape
     assert (got.info.origin.position.x, got.info.origin.position.y) == grid.origin
     assert np.array_equal(np.array(got.data, dtype=np.int8).reshape(grid.shape), grid.data)
+    # the robot on polyswarm/robots, for RViz or Foxglove: where it was, named
+    assert robots, "no robot markers reached the subscriber"
+    last = {(m.ns, m.id): m for m in robots[-1].markers}
+    body, name = last[("robots", 0)], last[("names", 0)]
+    assert name.text == "r1" and body.header.frame_id == "map"
+    here = np.array([body.pose.position.x, body.pose.position.y])
+    assert np.hypot(*(here - agent.pose[:2])) < 0.5  # sent at most 0.5 s before the end
