@@ -421,11 +421,17 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
                     self._assign(live, ids, targets, costs)
                     # 4. no progress towards a target for too long counts as a failure
                     self._watch_progress(live, ids, costs)
-            if self.state == MissionState.RETURNING and all(
-                # home, or unable to get there (the exploration itself is complete)
-                r.home_failed or (r.status is not None and r.status.state == RobotState.HOME)
-                for r in live
-                if r.assignment is not None and r.assignment.kind == AssignmentKind.HOME
+            if (
+                self.state == MissionState.RETURNING
+                and all(
+                    # home, or unable to get there (the exploration itself is complete)
+                    r.home_failed or (r.status is not None and r.status.state == RobotState.HOME)
+                    for r in live
+                    if r.assignment is not None and r.assignment.kind == AssignmentKind.HOME
+                )
+                # and every map a robot announced is here: one back from out of range
+                # first hands over what it mapped alone
+                and all(r.behind_since is None for r in live)
             ):
                 self.state = MissionState.DONE
                 log.info("mission done")

@@ -563,3 +563,25 @@ def test_a_coordinator_taking_over_keeps_each_robots_target_and_gives_none_twice
     assert out.assignments["r2"].target == 900  # sent again at once by the new leader
     assert "r1" not in out.assignments or out.assignments["r1"].target != 900
     assert c.new_target_id() > 950
+
+
+def test_the_mission_is_not_done_while_a_robot_back_in_range_has_not_handed_over_its_map():
+    """Home, but its poses announce a map version the coordinator has not received (it
+    mapped while out of range): the mission ends once that map is here."""
+    c = coordinator(1)
+    feed(c, "r1", corridor_map(open_end=False), 0.1)
+    c.now = 1.0
+    c.cycle()
+    c._end_exploration([c.robots["r1"]])
+    home = c.robots["r1"].assignment
+    c.on_status("r1", c.now, RobotStatus(RobotState.HOME, home.target))
+    have = c.robots["r1"].map.version
+    c.on_pose("r1", c.now, Pose(1.0, 1.0, 0.0, have + 5))  # mapped on its own meanwhile
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.RETURNING
+    later = corridor_map(open_end=False)
+    c.on_robot_map("r1", type(later)(later.cell_size, later.cells, have + 5))  # fetched whole
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.DONE
