@@ -65,6 +65,19 @@ def test_hosts_reach_each_other_over_wifi0_only_and_a_cut_link_is_cut(tmp_path):
     assert _ours(run) == []
 
 
+def test_a_network_whose_launch_died_is_swept_away_by_the_next(tmp_path):
+    run = "t" + os.urandom(1).hex()
+    net = netns.FleetNetwork.create(run, ["a", "b"], tmp_path / "sockets")
+    try:
+        dead = subprocess.Popen(["true"])
+        dead.wait()
+        netns._owner(run).write_text(str(dead.pid))  # its launch was killed (SIGKILL)
+        assert sorted(netns.sweep_stale()) == sorted([net.namespace("a"), net.namespace("b")])
+        assert _ours(run) == [] and not netns._owner(run).exists()
+    finally:
+        net.remove()
+
+
 def test_without_root_netns_says_so_in_one_line(monkeypatch):
     monkeypatch.setattr(netns.os, "geteuid", lambda: 1000)
     with pytest.raises(netns.NetworkError, match="needs root"):

@@ -38,6 +38,7 @@ PREFIX = "ps-"  # every namespace polyswarm makes starts with this
 SUBNET = "10.77.0"  # the radio's /24: private, and only ever inside our own namespaces
 PORT = 7447  # each host's router, on its wifi0 address
 IP_TIMEOUT_S = 10.0
+OWNERS = Path("/run/polyswarm")  # which process made each run's network (a pid file a run)
 
 
 class NetworkError(PolyswarmError):
@@ -64,6 +65,43 @@ def check_can_build() -> None:
         raise NetworkError("--netns needs root (it makes network namespaces, veths, a bridge)")
 
 
+def _owner(run: str) -> Path:
+    return OWNERS / f"netns-{run}.pid"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def sweep_stale() -> list[str]:
+    """Remove the networks of runs whose process is gone (killed before it could clean
+    up); a run without a pid file is someone else's and stays. Returns the namespaces
+    removed."""
+    removed = []
+    for run in sorted({n[len(PREFIX) :].split("-", 1)[0] for n in namespaces()}):
+        try:
+            pid = int(_owner(run).read_text())
+        except (OSError, ValueError):
+            continue
+        if _alive(pid):
+            continue
+        for n in namespaces():
+            if n.startswith(f"{PREFIX}{run}-"):
+                _ip("netns", "del", n, check=False)
+                removed.append(n)
+        _ip("link", "del", f"psbr-{run}"[:15], check=False)
+        _owner(run).unlink(missing_ok=True)
+    if removed:
+        log.warning("network: removed %d namespaces left by a run that died", len(removed))
+    return removed
+
+
 def namespaces() -> list[str]:
     """The network namespaces polyswarm made that exist now."""
     out = _ip("netns", "list", check=False).stdout
@@ -84,9 +122,12 @@ class FleetNetwork:
         check_can_build()
         if len(hosts) > 250:
             raise NetworkError(f"{len(hosts)} hosts: the radio's /24 holds 250")
+        sweep_stale()
         net = cls(run, list(hosts), Path(sockets_dir))
         net.sockets_dir.mkdir(parents=True, exist_ok=True)
         try:
+            OWNERS.mkdir(parents=True, exist_ok=True)
+            _owner(run).write_text(str(os.getpid()))
             net._build()
         except NetworkError:
             net.remove()
@@ -160,6 +201,7 @@ class FleetNetwork:
         for host in self.hosts:
             _ip("netns", "del", self.namespace(host), check=False)
         _ip("link", "del", self.bridge, check=False)
+        _owner(self.run).unlink(missing_ok=True)
         self.made = False
         left = [n for n in namespaces() if n.startswith(self.namespace(""))]
         if left:
