@@ -71,11 +71,12 @@ class Alone:
         )
 
     def wants_target(self, now_s: float, state: RobotState, current: Assignment | None) -> bool:
-        """Alone, with nothing to do: no assignment, or an exploration target finished
-        or given up (a stop or the way home the coordinator sent stands)."""
+        """Alone, with nothing to do: no assignment, told to wait (a stop: no target left
+        for it then), or an exploration target finished or given up; the way home the
+        coordinator sent at the mission's end stands."""
         if not self.active(now_s) or state not in IDLE_STATES:
             return False
-        return current is None or current.kind == AssignmentKind.EXPLORE
+        return current is None or current.kind != AssignmentKind.HOME
 
     def due(self, now_s: float) -> bool:
         """Time to look for a target (at most every ``RETRY_S``)."""

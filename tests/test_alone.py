@@ -36,7 +36,7 @@ def test_alone_only_once_a_coordinator_was_alive_and_has_been_gone_a_while():
     assert not a.active(30.0)
 
 
-def test_wants_a_target_when_idle_or_done_exploring_but_not_when_sent_home():
+def test_wants_a_target_when_idle_waiting_or_done_exploring_but_not_when_sent_home():
     a = Alone()
     a.coordinator("c", True, 0.0)
     a.coordinator("c", False, 0.0)
@@ -47,6 +47,8 @@ def test_wants_a_target_when_idle_or_done_exploring_but_not_when_sent_home():
     assert a.wants_target(t, RobotState.REACHED, explore)
     assert not a.wants_target(t, RobotState.NAVIGATING, explore)
     assert not a.wants_target(t, RobotState.REACHED, home)
+    wait = Assignment(AssignmentKind.STOP, -1)  # no target for it when it was cut off
+    assert a.wants_target(t, RobotState.IDLE, wait)
 
 
 def test_the_nearest_open_frontier_and_ids_of_its_own():
