@@ -75,6 +75,9 @@ END_CONFIRM_CYCLES = 3
 # robots whose frames are not found hold the end of the exploration this long (simulated
 # s) after the last frontier: matches every 5 s need a few more views of a shared place
 FRAME_WAIT_S = 120.0
+# every robot home, the mission waits at most this long (s) for maps it has not received
+# yet (a robot back from out of range hands over what it mapped alone: 1-2 s)
+HANDOVER_WAIT_S = 20.0
 
 
 @dataclass
@@ -197,6 +200,7 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
         self.fetch_bytes = 0  # ... and the bytes they took
         self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
         self.frames_pending: tuple[str, ...] = ()  # robots exploring in frames of their own
+        self._handover_since: float | None = None  # every robot home, waiting for a map
         # robots drawn to a rendezvous (``agents.anchoring``): robot -> (x m, y m, heading
         # rad) in this coordinator's frame. A robot exploring alone is drawn to where its
         # candidate frame puts the nearest robot of the swarm (and the way that one faces)
@@ -421,20 +425,13 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
                     self._assign(live, ids, targets, costs)
                     # 4. no progress towards a target for too long counts as a failure
                     self._watch_progress(live, ids, costs)
-            if (
-                self.state == MissionState.RETURNING
-                and all(
-                    # home, or unable to get there (the exploration itself is complete)
-                    r.home_failed or (r.status is not None and r.status.state == RobotState.HOME)
-                    for r in live
-                    if r.assignment is not None and r.assignment.kind == AssignmentKind.HOME
-                )
-                # and every map a robot announced is here: one back from out of range
-                # first hands over what it mapped alone
-                and all(r.behind_since is None for r in live)
+            if self.state == MissionState.RETURNING and all(
+                # home, or unable to get there (the exploration itself is complete)
+                r.home_failed or (r.status is not None and r.status.state == RobotState.HOME)
+                for r in live
+                if r.assignment is not None and r.assignment.kind == AssignmentKind.HOME
             ):
-                self.state = MissionState.DONE
-                log.info("mission done")
+                self._finish(live)
         for r in self.robots.values():
             if r.alive and r.assignment is not None and self.now - r.sent_t >= RESEND_S:
                 out.assignments[r.id] = r.assignment
@@ -461,6 +458,20 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
             self.fetch_bytes,
         )
         return out
+
+    def _finish(self, live) -> None:
+        """Every robot home: the mission is done once every map a robot announced is
+        here (one back from out of range first hands over what it mapped alone), or
+        after ``HANDOVER_WAIT_S`` of waiting for it."""
+        behind = sorted(r.id for r in live if r.behind_since is not None)
+        if behind and self._handover_since is None:
+            self._handover_since = self.now
+        if behind and self.now - self._handover_since < HANDOVER_WAIT_S:
+            return
+        if behind:
+            log.warning("mission done without the last updates of %s", ", ".join(behind))
+        self.state = MissionState.DONE
+        log.info("mission done")
 
     def _waiting_for_frames(self) -> bool:
         """Robots whose frames are not found yet (``frames_pending``, set by the process)

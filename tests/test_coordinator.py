@@ -585,3 +585,22 @@ def test_the_mission_is_not_done_while_a_robot_back_in_range_has_not_handed_over
     c.now += 1.0
     c.cycle()
     assert c.state == MissionState.DONE
+
+
+def test_a_map_that_never_arrives_holds_the_end_of_the_mission_only_so_long():
+    from agents.coordinator import HANDOVER_WAIT_S
+
+    c = coordinator(1)
+    feed(c, "r1", corridor_map(open_end=False), 0.1)
+    c.now = 1.0
+    c.cycle()
+    c._end_exploration([c.robots["r1"]])
+    home = c.robots["r1"].assignment
+    c.on_status("r1", c.now, RobotStatus(RobotState.HOME, home.target))
+    c.on_pose("r1", c.now, Pose(1.0, 1.0, 0.0, c.robots["r1"].map.version + 5))
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.RETURNING
+    c.now += HANDOVER_WAIT_S
+    c.cycle()
+    assert c.state == MissionState.DONE
