@@ -565,9 +565,8 @@ def test_a_coordinator_taking_over_keeps_each_robots_target_and_gives_none_twice
     assert c.new_target_id() > 950
 
 
-def test_the_mission_is_not_done_while_a_robot_back_in_range_has_not_handed_over_its_map():
-    """Home, but its poses announce a map version the coordinator has not received (it
-    mapped while out of range): the mission ends once that map is here."""
+def home_with_nothing_left() -> Coordinator:
+    """One robot, a corridor explored to its end, the robot home."""
     c = coordinator(1)
     feed(c, "r1", corridor_map(open_end=False), 0.1)
     c.now = 1.0
@@ -575,6 +574,13 @@ def test_the_mission_is_not_done_while_a_robot_back_in_range_has_not_handed_over
     c._end_exploration([c.robots["r1"]])
     home = c.robots["r1"].assignment
     c.on_status("r1", c.now, RobotStatus(RobotState.HOME, home.target))
+    return c
+
+
+def test_the_mission_is_not_done_while_a_robot_back_in_range_has_not_handed_over_its_map():
+    """Home, but its poses announce a map version the coordinator has not received (it
+    mapped while out of range): the mission ends once that map is here."""
+    c = home_with_nothing_left()
     have = c.robots["r1"].map.version
     c.on_pose("r1", c.now, Pose(1.0, 1.0, 0.0, have + 5))  # mapped on its own meanwhile
     c.now += 1.0
@@ -590,13 +596,7 @@ def test_the_mission_is_not_done_while_a_robot_back_in_range_has_not_handed_over
 def test_a_map_that_never_arrives_holds_the_end_of_the_mission_only_so_long():
     from agents.coordinator import HANDOVER_WAIT_S
 
-    c = coordinator(1)
-    feed(c, "r1", corridor_map(open_end=False), 0.1)
-    c.now = 1.0
-    c.cycle()
-    c._end_exploration([c.robots["r1"]])
-    home = c.robots["r1"].assignment
-    c.on_status("r1", c.now, RobotStatus(RobotState.HOME, home.target))
+    c = home_with_nothing_left()
     c.on_pose("r1", c.now, Pose(1.0, 1.0, 0.0, c.robots["r1"].map.version + 5))
     c.now += 1.0
     c.cycle()

@@ -17,7 +17,7 @@ import numpy as np
 import shapely
 import shapely.affinity
 
-from agents.leadership import wins
+from agents.leadership import Following
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import MapError
 from polyswarm.evaluation.coverage import coverage_tolerance, reachable_free, time_to_coverage
@@ -83,6 +83,7 @@ class Observer:
     def __init__(self, world, cfg: Config, ids: list[str]) -> None:
         self.world = world
         self.outages = netns.Outages()  # links cut (launch --netns)
+        self.following = Following()  # the active coordinator, as the robots see it
         self.leaders: list[list] = []  # [term, name, sim s, wall s] as the leader changed
         self.coordinator_lost: list[float] = []  # wall s: active coordinators killed
         # coverage counts the free space the robots' footprint can reach, less a band of
@@ -216,18 +217,18 @@ class Observer:
             self.coverage.append((self.sim_t, self.coverage_now()))
 
     def _leader(self, msg: CoordinatorStatus) -> bool:
-        """Whether ``msg`` comes from the leader (``agents.leadership.wins``); a new one
-        is recorded, and its merged map fetched whole."""
+        """Whether ``msg`` comes from the leader (chosen as robots choose it,
+        ``agents.leadership.Following``); a new one is recorded, and its merged map
+        fetched whole."""
         if not msg.leader:
             return True
-        now = (msg.term, msg.leader)
-        last = tuple(self.leaders[-1][:2]) if self.leaders else None
-        if last is not None and last != now and not wins(now, last):
-            return False
-        if not self.leaders or self.leaders[-1][:2] != list(now):
+        before = self.following.leader
+        self.following.heard(msg)
+        now = self.following.leader
+        if now != before:
             self.leaders.append([*now, round(self.sim_t, 2), round(time.monotonic(), 3)])
-            self.need_resync = self.need_resync or len(self.leaders) > 1
-        return True
+            self.need_resync = self.need_resync or before is not None
+        return now == (msg.term, msg.leader)
 
     def handle(self, keys: SwarmKeys, item) -> None:
         msg = item.msg
