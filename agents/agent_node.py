@@ -19,6 +19,7 @@ from agents.leadership import Following
 from agents.robot import Outbox, RobotAgent, scan_end_s, scan_from_message
 from polyswarm.config import Config, SensorSource
 from polyswarm.errors import DecodeError, MapError, PolyswarmError
+from protocols.chunks import MAP_KIND_OF, MapChunk, MapKind
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import (
     decode_delta,
@@ -27,18 +28,7 @@ from protocols.mapcodec import (
     encode_delta,
     encode_updates,
 )
-from protocols.messages import (
-    MAP_KIND_OF,
-    Anchor,
-    Assignment,
-    CoordinatorStatus,
-    MapChunk,
-    MapKind,
-    Odometry,
-    Pose,
-    Priors,
-    Scan,
-)
+from protocols.messages import Anchor, Assignment, CoordinatorStatus, Odometry, Pose, Priors, Scan
 
 log = logging.getLogger(__name__)
 

@@ -23,20 +23,14 @@ from agents.robotmaps import DRAIN_TIMEOUT_S
 from polyswarm.config import Config, known_starts
 from polyswarm.errors import DecodeError, MapError, PolyswarmError
 from polyswarm.polymap import MapDelta
+from protocols.chunks import MapChunk, MapKind
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import (
     decode_any_map,
     encode_delta,
     encode_map,
 )
-from protocols.messages import (
-    Assignment,
-    CoordinatorStatus,
-    MapChunk,
-    MapKind,
-    Pose,
-    RobotStatus,
-)
+from protocols.messages import Assignment, CoordinatorStatus, Pose, RobotStatus
 
 log = logging.getLogger(__name__)
 

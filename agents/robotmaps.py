@@ -14,13 +14,11 @@ from polyswarm.frames.jointgraph import KeyframeLedger
 from polyswarm.frames.sighting import SIGHTING_SLACK_M
 from polyswarm.polymap import GridPolyMap, MapDelta, MergeOp
 from polyswarm.slam.follow import Atlas, CorrectionOp, largest_move_m, replay_correction
+from protocols.chunks import MapKind
 from protocols.mapcodec import (
     decode_correction,
     decode_delta,
     decode_merge,
-)
-from protocols.messages import (
-    MapKind,
 )
 
 if TYPE_CHECKING:

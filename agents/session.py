@@ -5,7 +5,7 @@
 * ``Bus``: typed publish/subscribe over one session. Callbacks run on Zenoh's threads,
   so received messages are decoded there and queued; the process handles them on its
   own thread with ``Bus.poll``. Maps and deltas go RELIABLE with BLOCK congestion
-  control and are chunked (``protocols.messages.CHUNK_BYTES``); telemetry may use DROP.
+  control and are chunked (``protocols.chunks.CHUNK_BYTES``); telemetry may use DROP.
   Malformed messages are counted and logged (rate limited), never raised.
 
     with open_session(SessionSpec.client("tcp/127.0.0.1:7447")) as session:
@@ -33,15 +33,8 @@ from pathlib import Path
 import zenoh
 
 from polyswarm.errors import CommsError, DecodeError
-from protocols.messages import (
-    MapChunk,
-    MapKind,
-    Message,
-    Reassembler,
-    chunk_payload,
-    decode,
-    encode,
-)
+from protocols.chunks import MapChunk, MapKind, Reassembler, chunk_payload
+from protocols.messages import Message, decode, encode
 
 log = logging.getLogger(__name__)
 

@@ -35,16 +35,10 @@ import numpy as np
 
 from polyswarm.errors import DecodeError, MapError
 from polyswarm.polymap import Cell, GridPolyMap, VectorType
+from protocols.chunks import MapChunk
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta, decode_map
-from protocols.messages import (
-    Assignment,
-    Clock,
-    CoordinatorStatus,
-    MapChunk,
-    Pose,
-    RobotStatus,
-)
+from protocols.messages import Assignment, Clock, CoordinatorStatus, Pose, RobotStatus
 
 log = logging.getLogger(__name__)
 

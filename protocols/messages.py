@@ -9,8 +9,8 @@ type. Decoding untrusted bytes raises ``ProtocolError`` and nothing else.
     env, msg = decode(data)          # Envelope(type="odom", ...), Odometry(...)
     decode(data, expect=Odometry)    # ProtocolError unless it is an Odometry
 
-Maps and deltas (``protocols.mapcodec``) travel as ``MapChunk`` messages: a payload
-larger than ``CHUNK_BYTES`` is cut into parts and reassembled by ``Reassembler``.
+Maps and deltas (``protocols.mapcodec``) travel as ``MapChunk`` messages
+(``protocols.chunks``); the base class and the field checks are in ``protocols.base``.
 """
 
 from __future__ import annotations
@@ -18,26 +18,30 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 from enum import StrEnum
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import msgpack
 import numpy as np
 
-from polyswarm.errors import DecodeError
-from polyswarm.frames.sighting import SECTORS
 from polyswarm.slam.scan import LaserScan
+from protocols.base import (
+    Envelope,
+    Message,
+    ProtocolError,
+    blob,
+    clear_sectors,
+    integer,
+    number,
+    points,
+    text,
+    xy,
+)
+from protocols.chunks import CHUNK_BYTES, MapChunk
 from protocols.keys import NAME_RE
 
 PROTOCOL_VERSION = 1
-CHUNK_BYTES = 32 * 1024  # map payload per message: well under Zenoh's 64 KB batches
 MAX_MESSAGE_BYTES = CHUNK_BYTES + 4096  # anything larger is refused before parsing
-MAX_MAP_BYTES = 64 * 1024 * 1024  # a reassembled map larger than this is refused
 MAX_BEAMS = 100_000
-MAX_TEXT = 256  # characters of a free-text field
-
-
-class ProtocolError(DecodeError):
-    """A message from the network is malformed (refused whole; nothing is applied)."""
 
 
 class RobotState(StrEnum):
@@ -62,102 +66,11 @@ class MissionState(StrEnum):
     DONE = "done"
 
 
-class MapKind(StrEnum):
-    DELTA = "delta"  # a polymap-delta (PROTOCOL.md 3.3)
-    MERGE = "merge"  # a polymap-merge (3.4): the keyframe polygon that changed the map
-    CORRECT = "correct"  # a polymap-correct (3.5): keyframes a loop closure moved
-    MAP = "map"  # a full polymap (3.2), the reply of a map queryable
-
-
-# the type of an encoded map change (``protocols.mapcodec``) -> the MapChunk kind it goes in
-MAP_KIND_OF = {
-    "polymap-delta": MapKind.DELTA,
-    "polymap-merge": MapKind.MERGE,
-    "polymap-correct": MapKind.CORRECT,
-}
-
-
-# --- field checks ------------------------------------------------------------------------
-
-
-def _num(v: Any, name: str, lo: float = -1e9, hi: float = 1e9) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        raise ProtocolError(f"field {name!r}: expected a number")
-    v = float(v)
-    if not (math.isfinite(v) and lo <= v <= hi):
-        raise ProtocolError(f"field {name!r}: {v} is not within [{lo}, {hi}]")
-    return v
-
-
-def _int(v: Any, name: str, lo: int = -(2**62), hi: int = 2**62) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
-        raise ProtocolError(f"field {name!r}: expected an integer in [{lo}, {hi}]")
-    return v
-
-
-def _str(v: Any, name: str, choices: type[StrEnum] | None = None) -> str:
-    if not isinstance(v, str) or len(v) > MAX_TEXT:
-        raise ProtocolError(f"field {name!r}: expected a string of at most {MAX_TEXT} chars")
-    if choices is not None:
-        try:
-            return choices(v)
-        except ValueError:
-            raise ProtocolError(f"field {name!r}: {v!r} is not one of {list(choices)}") from None
-    return v
-
-
-def _bytes(v: Any, name: str, max_len: int) -> bytes:
-    if not isinstance(v, bytes) or len(v) > max_len:
-        raise ProtocolError(f"field {name!r}: expected at most {max_len} bytes")
-    return v
-
-
-def _clear(v: Any) -> bytes:
-    v = _bytes(v, "clr", SECTORS)
-    if v and len(v) != SECTORS:
-        raise ProtocolError(f"field 'clr': expected {SECTORS} bytes, got {len(v)}")
-    return v
-
-
-def _xy(v: Any, name: str) -> tuple[float, float]:
-    if not isinstance(v, list | tuple) or len(v) != 2:
-        raise ProtocolError(f"field {name!r}: expected [x, y]")
-    return (_num(v[0], name), _num(v[1], name))
-
-
-def _points(v: Any, name: str, max_n: int = 4096) -> tuple[tuple[float, float], ...]:
-    if not isinstance(v, list | tuple) or len(v) > max_n:
-        raise ProtocolError(f"field {name!r}: expected a list of at most {max_n} points")
-    return tuple(_xy(p, name) for p in v)
-
-
 MAX_STATUS_PATH_POINTS = 64  # a robot status carries at most this many path points
 MAX_STATUS_POINTS = 256  # a coordinator status: at most this many targets (and blacklisted)
 
 
 # --- messages ----------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Envelope:
-    type: str
-    version: int
-    sender: str
-    seq: int
-    stamp_s: float
-
-
-class Message:
-    """Base of the message types: ``TYPE`` names it on the wire."""
-
-    TYPE: ClassVar[str]
-
-    def body(self) -> dict:
-        raise NotImplementedError
-
-    @classmethod
-    def from_body(cls, b: dict) -> Message:
-        raise NotImplementedError
 
 
 @dataclass(frozen=True)
@@ -205,24 +118,24 @@ class Scan(Message):
 
     @classmethod
     def from_body(cls, b: dict) -> Scan:
-        raw = _bytes(b.get("r"), "r", 4 * MAX_BEAMS)
+        raw = blob(b.get("r"), "r", 4 * MAX_BEAMS)
         if len(raw) % 4 or len(raw) < 8:
             raise ProtocolError("field 'r': expected at least 2 float32 ranges")
         ranges = np.frombuffer(raw, dtype="<f4").astype(float)
-        rmin = _num(b.get("rmin"), "rmin", 0.0, 1e4)
-        rmax = _num(b.get("rmax"), "rmax", 0.0, 1e4)
+        rmin = number(b.get("rmin"), "rmin", 0.0, 1e4)
+        rmax = number(b.get("rmax"), "rmax", 0.0, 1e4)
         if rmax <= rmin:
             raise ProtocolError("range_max must exceed range_min")
         if (ranges[np.isfinite(ranges)] < 0).any():
             raise ProtocolError("negative range")
         return cls(
-            _num(b.get("a0"), "a0", -2 * math.pi, 2 * math.pi),
-            _num(b.get("da"), "da", -math.pi, math.pi),
+            number(b.get("a0"), "a0", -2 * math.pi, 2 * math.pi),
+            number(b.get("da"), "da", -math.pi, math.pi),
             rmin,
             rmax,
             ranges,
-            _num(b.get("dt", 0.0), "dt", 0.0, 1.0 / len(ranges)),  # a sweep within a second
-            _num(b.get("T", 0.0), "T", 0.0, 10.0),
+            number(b.get("dt", 0.0), "dt", 0.0, 1.0 / len(ranges)),  # a sweep within a second
+            number(b.get("T", 0.0), "T", 0.0, 10.0),
         )
 
 
@@ -243,11 +156,11 @@ class Odometry(Message):
     @classmethod
     def from_body(cls, b: dict) -> Odometry:
         return cls(
-            _num(b.get("x"), "x"),
-            _num(b.get("y"), "y"),
-            _num(b.get("th"), "th", -1e3, 1e3),
-            _num(b.get("lin", 0.0), "lin", -100, 100),
-            _num(b.get("ang", 0.0), "ang", -100, 100),
+            number(b.get("x"), "x"),
+            number(b.get("y"), "y"),
+            number(b.get("th"), "th", -1e3, 1e3),
+            number(b.get("lin", 0.0), "lin", -100, 100),
+            number(b.get("ang", 0.0), "ang", -100, 100),
         )
 
 
@@ -267,9 +180,9 @@ class CmdVel(Message):
     @classmethod
     def from_body(cls, b: dict) -> CmdVel:
         return cls(
-            _num(b.get("lin"), "lin", -100, 100),
-            _num(b.get("ang"), "ang", -100, 100),
-            _int(b.get("ack", -1), "ack", -1),
+            number(b.get("lin"), "lin", -100, 100),
+            number(b.get("ang"), "ang", -100, 100),
+            integer(b.get("ack", -1), "ack", -1),
         )
 
 
@@ -306,18 +219,18 @@ class Pose(Message):
 
     @classmethod
     def from_body(cls, b: dict) -> Pose:
-        wait = _str(b.get("wait", ""), "wait")
+        wait = text(b.get("wait", ""), "wait")
         if wait and not NAME_RE.match(wait):
             raise ProtocolError(f"field 'wait': bad robot name {wait!r}")
         return cls(
-            _num(b.get("x"), "x"),
-            _num(b.get("y"), "y"),
-            _num(b.get("th"), "th", -1e3, 1e3),
-            _int(b.get("ver", 0), "ver", 0),
+            number(b.get("x"), "x"),
+            number(b.get("y"), "y"),
+            number(b.get("th"), "th", -1e3, 1e3),
+            integer(b.get("ver", 0), "ver", 0),
             wait,
-            _int(b.get("frame", 0), "frame", 0),
-            _clear(b.get("clr", b"")),
-            _int(b.get("own", 0), "own", 0, 1) == 1,
+            integer(b.get("frame", 0), "frame", 0),
+            clear_sectors(b.get("clr", b"")),
+            integer(b.get("own", 0), "own", 0, 1) == 1,
         )
 
 
@@ -355,14 +268,14 @@ class RobotStatus(Message):
     @classmethod
     def from_body(cls, b: dict) -> RobotStatus:
         return cls(
-            _str(b.get("state"), "state", RobotState),
-            _int(b.get("target", -1), "target", OWN_TARGET_MIN),
-            _str(b.get("detail", ""), "detail"),
-            _int(b.get("kf", 0), "kf", 0),
-            _int(b.get("ver", 0), "ver", 0),
-            _int(b.get("bytes", 0), "bytes", 0),
-            _num(b.get("dist", 0.0), "dist", 0.0),
-            _points(b.get("path", ()), "path", MAX_STATUS_PATH_POINTS),
+            text(b.get("state"), "state", RobotState),
+            integer(b.get("target", -1), "target", OWN_TARGET_MIN),
+            text(b.get("detail", ""), "detail"),
+            integer(b.get("kf", 0), "kf", 0),
+            integer(b.get("ver", 0), "ver", 0),
+            integer(b.get("bytes", 0), "bytes", 0),
+            number(b.get("dist", 0.0), "dist", 0.0),
+            points(b.get("path", ()), "path", MAX_STATUS_PATH_POINTS),
         )
 
 
@@ -392,12 +305,12 @@ class Assignment(Message):
     @classmethod
     def from_body(cls, b: dict) -> Assignment:
         return cls(
-            _str(b.get("kind"), "kind", AssignmentKind),
-            _int(b.get("target"), "target", -1),
-            _xy(b.get("goal", (0.0, 0.0)), "goal"),
-            _points(b.get("frontier", ()), "frontier"),
-            _num(b.get("cost", 0.0), "cost", 0.0),
-            _int(b.get("ver", 0), "ver", 0),
+            text(b.get("kind"), "kind", AssignmentKind),
+            integer(b.get("target"), "target", -1),
+            xy(b.get("goal", (0.0, 0.0)), "goal"),
+            points(b.get("frontier", ()), "frontier"),
+            number(b.get("cost", 0.0), "cost", 0.0),
+            integer(b.get("ver", 0), "ver", 0),
         )
 
 
@@ -440,13 +353,13 @@ class Anchor(Message):
 
     @classmethod
     def from_body(cls, b: dict) -> Anchor:
-        own = _int(b.get("own", 0), "own", 0, 1) == 1
-        team = _int(b.get("team", 0), "team", 0, 1) == 1
+        own = integer(b.get("own", 0), "own", 0, 1) == 1
+        team = integer(b.get("team", 0), "team", 0, 1) == 1
         a = cls(
-            _int(b.get("frame"), "frame", 1),
-            _num(b.get("x"), "x", -MAX_ANCHOR_M, MAX_ANCHOR_M),
-            _num(b.get("y"), "y", -MAX_ANCHOR_M, MAX_ANCHOR_M),
-            _num(b.get("th"), "th", -1e3, 1e3),
+            integer(b.get("frame"), "frame", 1),
+            number(b.get("x"), "x", -MAX_ANCHOR_M, MAX_ANCHOR_M),
+            number(b.get("y"), "y", -MAX_ANCHOR_M, MAX_ANCHOR_M),
+            number(b.get("th"), "th", -1e3, 1e3),
             own,
             team,
         )
@@ -495,16 +408,16 @@ class Priors(Message):
         for item in raw:
             if not isinstance(item, list) or len(item) != 4:
                 raise ProtocolError("field 'p': each prior is [keyframe, x, y, theta]")
-            kid = _int(item[0], "keyframe", last + 1, 2**31)
-            x = _int(item[1], "x", -MAX_PRIOR_MM, MAX_PRIOR_MM)
-            y = _int(item[2], "y", -MAX_PRIOR_MM, MAX_PRIOR_MM)
-            th = _int(item[3], "theta", -400_000, 400_000)  # within +-4 rad
+            kid = integer(item[0], "keyframe", last + 1, 2**31)
+            x = integer(item[1], "x", -MAX_PRIOR_MM, MAX_PRIOR_MM)
+            y = integer(item[2], "y", -MAX_PRIOR_MM, MAX_PRIOR_MM)
+            th = integer(item[3], "theta", -400_000, 400_000)  # within +-4 rad
             poses.append((kid, x, y, th))
             last = kid
         return cls(
-            _int(b.get("frame"), "frame", 0),
-            _num(b.get("sm"), "sm", 1e-4, 100.0),
-            _num(b.get("sr"), "sr", 1e-6, 10.0),
+            integer(b.get("frame"), "frame", 0),
+            number(b.get("sm"), "sm", 1e-4, 100.0),
+            number(b.get("sr"), "sr", 1e-6, 10.0),
             tuple(poses),
         )
 
@@ -573,19 +486,19 @@ class CoordinatorStatus(Message):
         ):
             raise ProtocolError("field 'leader': expected [name, term]")
         return cls(
-            _str(b.get("state"), "state", MissionState),
+            text(b.get("state"), "state", MissionState),
             tuple(robots),
-            _int(b.get("frontiers", 0), "frontiers", 0),
-            _int(b.get("ver", 0), "ver", 0),
-            _num(b.get("area", 0.0), "area", 0.0),
-            _num(b.get("cycle_ms", 0.0), "cycle_ms", 0.0),
-            _int(b.get("bytes", 0), "bytes", 0),
-            _num(b.get("cpu_ms", 0.0), "cpu_ms", 0.0),
-            _points(b.get("goals", ()), "goals", MAX_STATUS_POINTS),
-            _points(b.get("banned", ()), "banned", MAX_STATUS_POINTS),
-            *(_int(v, f"losses[{k}]", 0) for k, v in enumerate(losses)),
+            integer(b.get("frontiers", 0), "frontiers", 0),
+            integer(b.get("ver", 0), "ver", 0),
+            number(b.get("area", 0.0), "area", 0.0),
+            number(b.get("cycle_ms", 0.0), "cycle_ms", 0.0),
+            integer(b.get("bytes", 0), "bytes", 0),
+            number(b.get("cpu_ms", 0.0), "cpu_ms", 0.0),
+            points(b.get("goals", ()), "goals", MAX_STATUS_POINTS),
+            points(b.get("banned", ()), "banned", MAX_STATUS_POINTS),
+            *(integer(v, f"losses[{k}]", 0) for k, v in enumerate(losses)),
             leader[0],
-            _int(leader[1], "leader[1]", 0),
+            integer(leader[1], "leader[1]", 0),
         )
 
 
@@ -602,7 +515,7 @@ class Clock(Message):
 
     @classmethod
     def from_body(cls, b: dict) -> Clock:
-        return cls(_num(b.get("time"), "time", 0.0), _num(b.get("speed", 0.0), "speed", 0.0))
+        return cls(number(b.get("time"), "time", 0.0), number(b.get("speed", 0.0), "speed", 0.0))
 
 
 @dataclass(frozen=True)
@@ -632,58 +545,9 @@ class Truth(Message):
                 raise ProtocolError(f"field 'poses': bad robot name {k!r}")
             if not isinstance(v, list) or len(v) != 3:
                 raise ProtocolError("field 'poses': expected [x, y, theta]")
-            out[k] = (_num(v[0], "x"), _num(v[1], "y"), _num(v[2], "th", -1e3, 1e3))
-        return cls(out, _int(b.get("walls", 0), "walls", 0), _int(b.get("robots", 0), "robots", 0))
-
-
-@dataclass(frozen=True)
-class MapChunk(Message):
-    """Part ``part`` of ``parts`` of an encoded map or delta of ``total`` bytes.
-
-    ``base``/``ver``: the delta applies to map version ``base`` and gives ``ver`` (a full
-    map has base -1). ``stream`` is the sender's number for the payload, shared by its
-    parts."""
-
-    TYPE: ClassVar[str] = "map-chunk"
-    kind: MapKind
-    base: int
-    ver: int
-    stream: int  # identifies the payload among the sender's chunks
-    part: int
-    parts: int
-    total: int
-    data: bytes = field(repr=False)
-
-    def body(self) -> dict:
-        return {
-            "kind": str(self.kind),
-            "base": self.base,
-            "ver": self.ver,
-            "stream": self.stream,
-            "part": self.part,
-            "parts": self.parts,
-            "total": self.total,
-            "data": self.data,
-        }
-
-    @classmethod
-    def from_body(cls, b: dict) -> MapChunk:
-        ver = _int(b.get("ver"), "ver", 0)
-        parts = _int(b.get("parts"), "parts", 1, MAX_MAP_BYTES // CHUNK_BYTES + 1)
-        total = _int(b.get("total"), "total", 0, MAX_MAP_BYTES)
-        data = _bytes(b.get("data"), "data", CHUNK_BYTES)
-        part = _int(b.get("part"), "part", 0, parts - 1)
-        if total > parts * CHUNK_BYTES:
-            raise ProtocolError("total larger than its parts can hold")
+            out[k] = (number(v[0], "x"), number(v[1], "y"), number(v[2], "th", -1e3, 1e3))
         return cls(
-            _str(b.get("kind"), "kind", MapKind),
-            _int(b.get("base"), "base", -1, ver),
-            ver,
-            _int(b.get("stream"), "stream", 0),
-            part,
-            parts,
-            total,
-            data,
+            out, integer(b.get("walls", 0), "walls", 0), integer(b.get("robots", 0), "robots", 0)
         )
 
 
@@ -742,7 +606,7 @@ def decode(data: bytes, expect: type[Message] | None = None) -> tuple[Envelope, 
     src = obj.get("src")
     if not isinstance(src, str) or not NAME_RE.match(src):
         raise ProtocolError(f"bad sender {src!r}")
-    seq, stamp = _int(obj.get("seq"), "seq", 0), _num(obj.get("ts"), "ts", 0.0, 1e12)
+    seq, stamp = integer(obj.get("seq"), "seq", 0), number(obj.get("ts"), "ts", 0.0, 1e12)
     env = Envelope(kind, PROTOCOL_VERSION, src, seq, stamp)
     try:
         msg = cls.from_body(obj)
@@ -755,82 +619,3 @@ def decode(data: bytes, expect: type[Message] | None = None) -> tuple[Envelope, 
 
 def message_fields(cls: type[Message]) -> list[str]:
     return [f.name for f in fields(cls)]
-
-
-# --- chunking ----------------------------------------------------------------------------
-
-
-def chunk_payload(
-    kind: MapKind, payload: bytes, base: int, ver: int, stream: int
-) -> list[MapChunk]:
-    """Cut an encoded map or delta into chunks of at most ``CHUNK_BYTES``."""
-    if len(payload) > MAX_MAP_BYTES:
-        raise ProtocolError(f"map payload of {len(payload)} bytes exceeds {MAX_MAP_BYTES}")
-    parts = max(1, -(-len(payload) // CHUNK_BYTES))
-    return [
-        MapChunk(
-            kind,
-            base,
-            ver,
-            stream,
-            k,
-            parts,
-            len(payload),
-            payload[k * CHUNK_BYTES : (k + 1) * CHUNK_BYTES],
-        )
-        for k in range(parts)
-    ]
-
-
-@dataclass
-class _Partial:
-    first: MapChunk
-    parts: dict[int, bytes]
-    started_s: float
-
-
-class Reassembler:
-    """Collects map chunks per (sender, stream) into whole payloads.
-
-    Incomplete payloads are dropped after ``timeout_s`` (of the caller's clock) and at
-    most ``max_pending`` are kept; chunks that disagree with their stream's first chunk
-    are refused. ``add`` returns the first chunk and the whole payload once complete."""
-
-    def __init__(self, timeout_s: float = 10.0, max_pending: int = 16) -> None:
-        self.timeout_s = timeout_s
-        self.max_pending = max_pending
-        self._pending: dict[tuple[str, int], _Partial] = {}
-
-    def add(self, sender: str, chunk: MapChunk, now_s: float) -> tuple[MapChunk, bytes] | None:
-        for key in [k for k, p in self._pending.items() if now_s - p.started_s > self.timeout_s]:
-            del self._pending[key]
-        if chunk.parts == 1:
-            if len(chunk.data) != chunk.total:
-                raise ProtocolError("single chunk does not hold its total")
-            return chunk, chunk.data
-        key = (sender, chunk.stream)
-        p = self._pending.get(key)
-        if p is None:
-            if len(self._pending) >= self.max_pending:
-                oldest = min(self._pending, key=lambda k: self._pending[k].started_s)
-                del self._pending[oldest]
-            p = self._pending[key] = _Partial(chunk, {}, now_s)
-        f = p.first
-        if (chunk.kind, chunk.base, chunk.ver, chunk.parts, chunk.total) != (
-            f.kind,
-            f.base,
-            f.ver,
-            f.parts,
-            f.total,
-        ):
-            del self._pending[key]
-            raise ProtocolError("chunk disagrees with the rest of its stream")
-        expected = min(CHUNK_BYTES, chunk.total - chunk.part * CHUNK_BYTES)
-        if len(chunk.data) != expected:
-            del self._pending[key]
-            raise ProtocolError(f"chunk {chunk.part} holds {len(chunk.data)} bytes, not {expected}")
-        p.parts[chunk.part] = chunk.data
-        if len(p.parts) < chunk.parts:
-            return None
-        del self._pending[key]
-        return f, b"".join(p.parts[k] for k in range(chunk.parts))

@@ -28,8 +28,8 @@ def test_an_anchored_slam_moves_its_map_as_one_correction_a_receiver_follows(sha
     kept from the wire follows it bit for bit, and SLAM goes on in the new frame."""
     from agents.coordinator import Coordinator
     from polyswarm.io.carmen import read_carmen, real_odometry
+    from protocols.chunks import MAP_KIND_OF
     from protocols.mapcodec import encode_updates
-    from protocols.messages import MAP_KIND_OF
 
     log = read_carmen(shared_data / "logs" / "aces-corrected.log.gz")
     odom = real_odometry(log)

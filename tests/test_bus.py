@@ -9,8 +9,9 @@ import pytest
 
 from agents.session import Bus, SessionSpec, is_alive_change, open_session, session_config
 from polyswarm.errors import CommsError
+from protocols.chunks import CHUNK_BYTES, MapChunk, MapKind
 from protocols.keys import SwarmKeys
-from protocols.messages import CHUNK_BYTES, Clock, MapChunk, MapKind, Odometry, Pose, encode
+from protocols.messages import Clock, Odometry, Pose, encode
 
 KEYS = SwarmKeys("test")
 

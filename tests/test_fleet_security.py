@@ -14,8 +14,8 @@ import pytest
 from agents.fleet import client_config, router_config
 from agents.session import Bus, SessionSpec, open_session
 from polyswarm.errors import CommsError
+from protocols.chunks import MapChunk, MapKind
 from protocols.keys import SwarmKeys
-from protocols.messages import MapChunk, MapKind
 
 KEYS = SwarmKeys("lab")
 

@@ -140,8 +140,8 @@ def test_slam_following_the_graph_sends_corrections_a_receiver_and_the_coordinat
     from agents.coordinator import Coordinator
     from polyswarm.benchmarks.bandwidth import Recording
     from polyswarm.io.carmen import read_carmen, real_odometry
+    from protocols.chunks import MAP_KIND_OF
     from protocols.mapcodec import encode_updates
-    from protocols.messages import MAP_KIND_OF
 
     log = read_carmen(shared_data / "logs" / "aces-corrected.log.gz")
     odom = real_odometry(log)

@@ -138,8 +138,9 @@ def test_two_simulated_robots_correct_the_one_placed_off_through_the_wire():
     from polyswarm.config import Config
     from polyswarm.polymap import cells_digest
     from polyswarm.slam.polyslam import PolySlam
+    from protocols.chunks import MAP_KIND_OF
     from protocols.mapcodec import encode_updates
-    from protocols.messages import MAP_KIND_OF, Priors, decode, encode
+    from protocols.messages import Priors, decode, encode
     from sim import Simulation, load_world
 
     cfg = Config()

@@ -12,26 +12,22 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from polyswarm.errors import ConfigError, DecodeError
+from protocols.chunks import CHUNK_BYTES, MapChunk, MapKind, Reassembler, chunk_payload
 from protocols.golden.make_golden import golden_messages
 from protocols.keys import SwarmKeys
 from protocols.messages import (
-    CHUNK_BYTES,
     ENVELOPE_KEYS,
     TYPES,
     Assignment,
     AssignmentKind,
     Clock,
     CoordinatorStatus,
-    MapChunk,
-    MapKind,
     Odometry,
     Pose,
     ProtocolError,
-    Reassembler,
     RobotState,
     RobotStatus,
     Scan,
-    chunk_payload,
     decode,
     encode,
 )

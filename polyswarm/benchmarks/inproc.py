@@ -64,8 +64,9 @@ def explore_in_process(
     from agents.merger import MergeProcess
     from agents.replay import ReplayPool
     from agents.robot import RobotAgent
+    from protocols.chunks import MAP_KIND_OF
     from protocols.mapcodec import encode_updates
-    from protocols.messages import MAP_KIND_OF, MissionState, Odometry
+    from protocols.messages import MissionState, Odometry
     from sim import Simulation, load_world, spread_start_poses
 
     cfg = cfg or Config()

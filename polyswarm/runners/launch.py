@@ -46,13 +46,13 @@ from polyswarm.runners.children import (
 )
 from polyswarm.runners.observer import Observer, _write_outputs
 from polyswarm.se2 import compose
+from protocols.chunks import MapChunk
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_map
 from protocols.messages import (
     Anchor,
     Clock,
     CoordinatorStatus,
-    MapChunk,
     MissionState,
     Pose,
     RobotStatus,

@@ -27,13 +27,13 @@ from polyswarm.polymap import GridPolyMap, MapDelta, VectorType
 from polyswarm.runners import netns
 from polyswarm.runners.children import Child, _rss_mb
 from polyswarm.se2 import compose, inverse, transform_points
+from protocols.chunks import MapChunk
 from protocols.keys import SwarmKeys
 from protocols.mapcodec import decode_delta
 from protocols.messages import (
     Anchor,
     Clock,
     CoordinatorStatus,
-    MapChunk,
     MissionState,
     Pose,
     RobotStatus,

@@ -92,6 +92,7 @@ def describe_polygons(polys) -> list:
 
 def golden_messages() -> list[tuple[str, object]]:
     """One message of every type (sender "r1", seq 7, stamp 12.5 s)."""
+    from protocols.chunks import MapChunk, MapKind
     from protocols.messages import (
         Anchor,
         Assignment,
@@ -99,8 +100,6 @@ def golden_messages() -> list[tuple[str, object]]:
         Clock,
         CmdVel,
         CoordinatorStatus,
-        MapChunk,
-        MapKind,
         MissionState,
         Odometry,
         Pose,
