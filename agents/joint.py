@@ -27,7 +27,7 @@ from polyswarm.frames.jointgraph import (
     moved_m,
 )
 from polyswarm.slam.follow import quantize_pose
-from protocols.messages import MAX_PRIORS, Priors
+from protocols.frame_messages import MAX_PRIORS, Priors
 
 log = logging.getLogger(__name__)
 

@@ -261,7 +261,7 @@ def test_a_pose_names_its_frame_only_once_anchored():
 
 
 def test_priors_travel_whole_and_bad_ones_are_refused():
-    from protocols.messages import MAX_PRIORS, Priors
+    from protocols.frame_messages import MAX_PRIORS, Priors
 
     good = Priors(2, 0.05, 0.01, ((3, 1250, -400, 1745), (6, 1300, -410, -1800)))
     _, back = decode(encode(good, "coordinator", 0, 0.0), Priors)
