@@ -69,25 +69,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agents.audits import Audit, Audits, log_evidence
+from agents.framematch import Matched, contradicted_where, match_frame
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
 from polyswarm.frames.mapmatch import (
-    MIN_OVERLAP_M2,
-    MIN_SEEN,
     FrameEstimate,
-    MapMatch,
-    MatchError,
-    fit_at,
-    fitting_rivals,
-    match_maps,
-    verdict_at,
 )
 from polyswarm.frames.sighting import (
     MIN_CONTRADICTIONS,
-    Room,
     Sighting,
     Track,
-    contradicted_where,
     distinct_places,
     mutual_seen,
 )
@@ -100,18 +92,6 @@ MATCH_PERIOD_S = 5.0  # simulated (or sensor) seconds between matches of one rob
 MIN_MAP_M2 = 10.0  # a map smaller than this (either one) is not matched yet
 RESEND_S = 5.0  # an anchor the robot's poses do not name yet is sent again after this
 SOLO_ID_OFFSET = 97_000_000  # solo coordinators' target ids start this far apart
-AUDIT_PERIOD_S = 10.0  # simulated seconds between audits of one merged robot's frame
-# moments since the hand-over that contradict a merged robot's frame before the merge is
-# undone: twice what leaves a candidate frame out (a frame the robots saw each other at
-# in three places is withdrawn on clearer evidence than a candidate is passed over on)
-UNDO_CONTRADICTIONS = 2 * MIN_CONTRADICTIONS
-# of the walls a merged robot's map shares with the maps merged before it, the share in
-# their clear space that undoes the merge, in UNDO_AUDITS audits in a row: right frames
-# conflict 0.1-0.2 % on the thesis sensor and 1-8 % on the TurtleBot3 (doubled
-# walls); a frame 2.2 m and 20 deg off, 62-69 % (office launch, seed 1)
-UNDO_CONFLICT_SHARE = 0.25
-UNDO_AUDITS = 2
-UNDO_EVIDENCE_LOGGED = 10  # contradicting moments logged with an undo
 WRONG_ANCHOR_ENV = "POLYSWARM_WRONG_ANCHOR"
 # places the robots were seen at a candidate frame before the waiting robot tours
 # standpoints ahead of its own frontiers: matches at wrong poses were seen anywhere 13
@@ -171,22 +151,7 @@ class _Waiting(_Pairing):
     epoch: int = 0  # its map copy's replay epoch in the main coordinator, before it left
 
 
-@dataclass
-class _Audit:
-    """A merged robot whose frame this coordinator found: checked on later sightings."""
-
-    frame: int  # the anchor its poses name
-    since_s: float  # handed over then: sightings since are the audit's evidence
-    last_s: float = -math.inf
-    running: Future | None = None
-    # the latest audit's moments against the frame: (other robot, time s, viewer 0 (the
-    # other) or 1 (this one), the viewer's x, y, where the frame put the one not seen
-    # x, y), metres, shared frame
-    evidence: list[tuple] = field(default_factory=list)
-    conflicting: int = 0  # audits in a row whose maps conflicted
-
-
-class Anchoring:
+class Anchoring(Audits):
     """The robots of the swarm whose frames are not known yet, and the audits of those
     whose frames were found here (see the module)."""
 
@@ -202,7 +167,7 @@ class Anchoring:
         # came 169 simulated seconds after the wrong merge
         self._audit_pool = ThreadPoolExecutor(1, thread_name_prefix="audit") if unknown else None
         self.anchored: dict[str, np.ndarray] = {}  # robot -> its frame in the shared one
-        self.audits: dict[str, _Audit] = {}  # robots merged on a frame found here
+        self.audits: dict[str, Audit] = {}  # robots merged on a frame found here
         self.undone = 0  # merges undone
         self._fault = wrong_anchor_fault(os.environ.get(WRONG_ANCHOR_ENV, ""))
         # every robot's poses and clear profiles: in the shared frame, or, while it
@@ -284,7 +249,7 @@ class Anchoring:
                 theirs = {o: (self.tracks.get(o), info) for o, info in main.robots.items()}
                 where, seen_at, tracks = self._evidence(rid, theirs, main.merged)
                 w.matching = self._pool.submit(
-                    _match, main.merged, own, where, seen_at, w.frames.candidate, tracks
+                    match_frame, main.merged, own, where, seen_at, w.frames.candidate, tracks
                 )
             if big:
                 self._match_teams(rid, w, now_s)
@@ -357,7 +322,7 @@ class Anchoring:
         where, seen_at, tracks = self._evidence(rid, team, theirs)
         own = self._team_map(rid)
         p.matching = self._pool.submit(
-            _match, theirs, own, where, seen_at, p.frames.candidate, tracks
+            match_frame, theirs, own, where, seen_at, p.frames.candidate, tracks
         )
 
     def _take(self, rid: str, w: _Waiting) -> None:
@@ -379,91 +344,6 @@ class Anchoring:
         log.warning("fault injection: %s anchored %s off its committed frame", rid, off)
         return compose(pose, off)
 
-    # -- merged robots' frames, audited ---------------------------------------------------
-
-    def _audit(self, main, now_s: float) -> list[tuple[str, Anchor]]:
-        """Take finished audits (undoing a merge the evidence contradicts); start due ones."""
-        out = []
-        for rid, a in list(self.audits.items()):
-            if a.running is not None and a.running.done():
-                try:
-                    a.evidence, share, overlap_m2 = a.running.result()
-                except Exception:  # a failed audit must not stop the coordinator: retried
-                    log.exception("auditing the frame of %s failed", rid)
-                else:
-                    clash = share >= UNDO_CONFLICT_SHARE and overlap_m2 >= MIN_OVERLAP_M2
-                    a.conflicting = a.conflicting + 1 if clash else 0
-                    log.info(
-                        "frame of %s audited: %d moments against it; %.1f %% of the walls "
-                        "shared with earlier maps (%.0f m2) in their clear space",
-                        rid,
-                        len(a.evidence),
-                        100 * share,
-                        overlap_m2,
-                    )
-                a.running = None
-                if len(a.evidence) >= UNDO_CONTRADICTIONS or a.conflicting >= UNDO_AUDITS:
-                    out.append((rid, self._undo(rid, main, now_s)))
-                    continue
-            if a.running is None and now_s - a.last_s >= AUDIT_PERIOD_S:
-                a.last_s = now_s
-                audit = self._audit_evidence(rid, a, main)
-                if audit is not None:
-                    a.running = self._audit_pool.submit(audit)
-        return out
-
-    def _audit_evidence(self, rid: str, a: _Audit, main):
-        """A function measuring what came since ``rid``'s hand-over against its frame:
-        (moments the robots' sightings contradict it, the share of the walls its map
-        shares with the maps it is held against that stand in their clear space, the
-        explored area shared); None while its map is not in.
-
-        The maps it is held against: those of the robots whose frames nobody audits
-        (starts given, the first robot) where they share ``MIN_OVERLAP_M2``; else those
-        of the robots merged before it. (Held against every earlier map, a right frame
-        met 22 % conflicts from a wrong one merged 2 s before it, office launch, seed 1.)"""
-        info = main.robots.get(rid)
-        if info is None or info.map is None:
-            return None
-        earlier = [
-            (o not in self.audits, other.map)
-            for o, other in main.robots.items()
-            if o != rid
-            and other.map is not None
-            and (o not in self.audits or self.audits[o].since_s < a.since_s)
-        ]
-        mine = self.tracks.get(rid)
-        if mine is not None:
-            mine = mine.since(max(a.since_s, info.corrected_s))
-        theirs = {
-            o: self.tracks[o].since(max(a.since_s, other.corrected_s))
-            for o, other in main.robots.items()
-            if o != rid and o in self.tracks
-        }
-        own = info.map
-        # every map here is in the shared frame: where any robot went, before the audit
-        # began as well, a wall is no conflict (copies here, paths in the audit's thread)
-        everyone = [
-            self.tracks[o].since(other.corrected_s)
-            for o, other in main.robots.items()
-            if o in self.tracks
-        ]
-        seen = mine is not None and len(mine) > 0 and bool(theirs)
-        where = _contradicted_where(theirs, {rid: mine}, (main.merged, own)) if seen else None
-
-        def audit() -> tuple[list[tuple], float, float]:
-            moments = where(np.zeros(3)) if where is not None else []
-            paths = [p for t in everyone for p in t.paths()]
-            fits = fit_at([m for _, m in earlier], own, np.zeros(3), paths, paths)
-            roots = [ev for (root, _), ev in zip(earlier, fits, strict=True) if root]
-            if sum(ev["overlap_m2"] for ev in roots) < MIN_OVERLAP_M2:
-                roots = fits
-            conflicts = sum(ev["conflict_share"] * ev["walls_inside"] for ev in roots)
-            inside = sum(ev["walls_inside"] for ev in roots)
-            return moments, conflicts / max(inside, 1.0), sum(ev["overlap_m2"] for ev in roots)
-
-        return audit
-
     def _undo(self, rid: str, main, now_s: float) -> Anchor:
         """Take ``rid`` out of the merged map and back to waiting; the ``own`` anchor
         that withdraws its frame."""
@@ -475,7 +355,7 @@ class Anchoring:
             len(a.evidence),
             a.conflicting,
         )
-        _log_evidence(a.evidence, logging.WARNING)
+        log_evidence(a.evidence, logging.WARNING, log)
         info = main.withdraw(rid)
         solo = self._solo(rid, info.start)  # its start, in the coordinates it speaks in
         mine = solo.robots[rid]
@@ -526,7 +406,7 @@ class Anchoring:
         """A finished match of ``rid``'s team's map ``against`` a map (the merged map,
         ``w`` its ``_Waiting``, or another team's, ``w`` that ``_Pairing``)."""
         try:
-            got: _Matched = done.result()
+            got: Matched = done.result()
         except Exception:  # a failed match must not stop the coordinator: logged, retried
             log.exception("matching the map of %s failed", rid)
             return
@@ -543,7 +423,7 @@ class Anchoring:
                 rid,
                 len(got.stale),
             )
-            _log_evidence(got.stale, logging.INFO)
+            log_evidence(got.stale, logging.INFO, log)
             w.frames.forget_candidate()
             w.seen_at_candidate = 0
         m = got.match
@@ -601,7 +481,7 @@ class Anchoring:
         if not mine or not theirs:
             return None, None, tracks
         maps = (merged, self._team_map(rid))
-        where = _contradicted_where(theirs, mine, maps)
+        where = contradicted_where(theirs, mine, maps)
 
         def seen_at(frame: np.ndarray) -> int:
             """Places in ``merged``'s frame, all robots' sightings."""
@@ -645,7 +525,7 @@ class Anchoring:
             self.tracks.pop(rid, None)  # poses in a frame not known here either
         else:
             pose = np.array([w.anchor.x, w.anchor.y, w.anchor.theta])
-            self.audits[rid] = _Audit(w.anchor.frame, since_s=main.now)
+            self.audits[rid] = Audit(w.anchor.frame, since_s=main.now)
         self.anchored[rid] = pose
         if rid in self.tracks:  # its poses so far, in the shared frame
             self.tracks[rid] = self.tracks[rid].moved(pose)
@@ -690,90 +570,3 @@ def _take_over(coord, rid: str, was, start: np.ndarray):
     if was.map is not None:
         coord.on_robot_map(rid, was.map, was.atlas)
     return info
-
-
-def _log_evidence(rows, level: int) -> None:
-    """The first ``UNDO_EVIDENCE_LOGGED`` moments that contradict a frame (``_Audit.evidence``'s
-    rows): who looked from where, and where the frame put the other."""
-    for o, m, t, viewer, vx, vy, px, py in list(rows)[:UNDO_EVIDENCE_LOGGED]:
-        who, whom = (o, m) if viewer == 0 else (m, o)
-        log.log(
-            level,
-            "  at %.1f s %s at (%.2f, %.2f) saw clear where the frame put %s: "
-            "(%.2f, %.2f), %.1f m away",
-            t,
-            who,
-            vx,
-            vy,
-            whom,
-            px,
-            py,
-            math.hypot(px - vx, py - vy),
-        )
-
-
-def _contradicted_where(theirs: dict[str, Track], mine: dict[str, Track], maps):
-    """A function of the frame of ``mine``'s robots (their tracks by robot, in the frame
-    of ``maps[1]``) in the frame of ``maps[0]``: the moments the sightings contradict it
-    (``polyswarm.frames.sighting.contradicted_where``, over every pair of one of the other
-    robots' tracks ``theirs`` and one of ``mine``), as ``_Audit.evidence``'s rows (the
-    other robot, the robot of ``mine``, then the row); their number is what a match
-    counts. Where the robots can stand in each map (``Room``) is
-    built at the first call, in the thread that calls it."""
-    rooms: list[Room] = []
-
-    def where(frame: np.ndarray) -> list[tuple]:
-        if not rooms:
-            rooms.extend([Room(maps[0]), Room(maps[1])])
-        return [
-            (o, m, float(row[0]), int(row[1]), *(float(v) for v in row[2:]))
-            for o, t in theirs.items()
-            for m, u in mine.items()
-            for row in contradicted_where(t, u, frame, (rooms[0], rooms[1]))
-        ]
-
-    return where
-
-
-@dataclass(frozen=True)
-class _Matched:
-    """What one match of a waiting robot's map found (``_match``)."""
-
-    match: MapMatch | None  # None: no match (``why``)
-    why: str = ""
-    seen: int = 0  # places the robots saw each other at its pose
-    # the moments that contradict the candidate frame it started with (``_Audit.evidence``'s
-    # rows): at least ``MIN_CONTRADICTIONS`` and it is stale
-    stale: tuple = ()
-
-
-def _match(merged, own, where, seen_at, candidate=None, tracks=((), ())) -> _Matched:
-    """``match_maps`` of a robot's map on the merged map (its images unchecked: two more
-    searches, three times the time, to tell what the sightings tell), and the places the
-    robots saw each other at the pose it found (0 without sightings). ``where``: the
-    moments the sightings contradict a frame (``_contradicted_where``; None without
-    sightings). ``candidate``: the frame the robot is being sent to meet the others by,
-    checked against the sightings. ``tracks``: the merged map's robots' tracks and the
-    waiting team's, whose paths spare walls (``match_maps``)."""
-    contradicts = None if where is None else (lambda f: len(where(f)) >= MIN_CONTRADICTIONS)
-    stale = tuple(where(candidate)) if candidate is not None and where is not None else ()
-    try:
-        theirs, mine = tracks
-        a_paths = [p for t in theirs for p in t.paths()]
-        b_paths = [p for t in mine for p in t.paths()]
-        m = match_maps(merged, own, contradicts, images=False, a_paths=a_paths, b_paths=b_paths)
-    except (MatchError, PolyswarmError) as e:
-        return _Matched(None, str(e), stale=stale)
-    if seen_at is None or not m.proposed:
-        return _Matched(m, stale=stale)
-    seen = seen_at(m.pose)
-    if seen < MIN_SEEN:
-        # the maps fit an image as well (a symmetric building): if the robots saw each
-        # other where an image puts them, that image is the one to propose (the loop,
-        # seed 3: an image scored best for 9 matches while the truth, a fitting rival,
-        # was seen at once when it came first)
-        for pose in fitting_rivals(m):
-            n = seen_at(pose)
-            if n > seen:
-                m, seen = verdict_at(m, pose), n
-    return _Matched(m, seen=seen, stale=stale)

@@ -373,7 +373,8 @@ def test_a_merge_contradicted_later_is_undone_and_the_frame_found_again(sighting
     them: nothing is lost), it is sent an ``own`` anchor and waits again in the
     coordinates it speaks in; the next matches and sightings anchor it right (anchor 3:
     the true frame, seen from those coordinates)."""
-    from agents.anchoring import RESEND_S, UNDO_AUDITS, UNDO_CONTRADICTIONS
+    from agents.anchoring import RESEND_S
+    from agents.audits import UNDO_AUDITS, UNDO_CONTRADICTIONS
     from protocols.messages import Pose
     from tests.test_sighting import profile_with_a_robot_at
 
@@ -456,7 +457,8 @@ def test_a_right_frame_is_held_against_maps_not_in_doubt_not_a_wrong_one_before_
     finds most of its shared walls in r1's clear space."""
     from shapely.geometry import box
 
-    from agents.anchoring import UNDO_CONFLICT_SHARE, Anchoring, _Audit
+    from agents.anchoring import Anchoring
+    from agents.audits import UNDO_CONFLICT_SHARE, Audit
     from agents.coordinator import Coordinator, RobotInfo
     from tests.test_mapmatch import _seen
 
@@ -471,7 +473,7 @@ def test_a_right_frame_is_held_against_maps_not_in_doubt_not_a_wrong_one_before_
         del frames.waiting[rid]
         main.robots[rid] = RobotInfo(rid, frame)
         main.robots[rid].map = transform_map(east, frame)
-        frames.audits[rid] = _Audit(1, since_s)
+        frames.audits[rid] = Audit(1, since_s)
     n3, share3, overlap3 = frames._audit_evidence("r3", frames.audits["r3"], main)()
     n2, share2, overlap2 = frames._audit_evidence("r2", frames.audits["r2"], main)()
     assert n2 == n3 == []  # no sightings: no moments against either
@@ -509,7 +511,7 @@ def test_a_restarted_coordinator_leaves_a_robot_whose_frame_was_withdrawn_waitin
 def test_a_match_proposes_the_image_of_the_frame_the_robots_saw_each_other_at():
     """A square room fits four ways; when the robots saw each other only where an image
     that did not score best puts them, the match proposes that image."""
-    from agents.anchoring import _match
+    from agents.framematch import match_frame as _match
     from polyswarm.frames.mapmatch import (
         MIN_SEEN,
         fitting_rivals,
