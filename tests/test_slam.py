@@ -12,7 +12,8 @@ from polyswarm.nav.navgraph import NavGraph
 from polyswarm.nav.planner import Planner
 from polyswarm.polymap import GridPolyMap, cells_digest
 from polyswarm.runners.slam import metrics, run_world
-from polyswarm.slam.polyslam import KeyframeSelector, PolySlam
+from polyswarm.slam.keyframe import KeyframeSelector
+from polyswarm.slam.polyslam import PolySlam
 from protocols.mapcodec import decode_merge, encode_merge
 from sim import Simulation, load_world, spread_start_poses
 

@@ -7,6 +7,8 @@ beam spacing at their range (far points of a 1-degree lidar are 0.5 m apart on a
 30 m away, more on a wall seen at a grazing angle). Every other vector (to or from an
 invalid beam, across a gap, or to the sensor centre) is a frontier. Points taken in
 angular order around the centre make a star-shaped, hence simple, polygon.
+
+``KeyframeSelector`` is stage 2: when a scan becomes a keyframe (travel or turn).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from polyswarm.polymap import Ring, TypedPolygon, VectorType
+from polyswarm.se2 import relative
 from polyswarm.slam.scan import ScanPoints
 
 
@@ -61,3 +64,29 @@ def keyframe_polygon(
         xy = np.vstack([xy, transform(points.origin[None, :], pose)])
         types = np.append(types, VectorType.FRONTIER).astype(np.uint8)
     return TypedPolygon(Ring(xy, types))
+
+
+class KeyframeSelector:
+    """Stage 2: a new keyframe after enough travel or rotation (odometry)."""
+
+    def __init__(self, distance_m: float, angle_rad: float) -> None:
+        self.distance_m, self.angle_rad = distance_m, angle_rad
+        self.last: np.ndarray | None = None
+
+    def due(self, odom: np.ndarray) -> bool:
+        if self.last is None:
+            return True
+        d = relative(self.last, odom)
+        return bool(np.hypot(d[0], d[1]) >= self.distance_m or abs(d[2]) >= self.angle_rad)
+
+    def moved(self, odom: np.ndarray, share: float) -> bool:
+        """Has the robot moved ``share`` of the way to the next keyframe?"""
+        if self.last is None:
+            return True
+        d = relative(self.last, odom)
+        return bool(
+            np.hypot(d[0], d[1]) >= share * self.distance_m or abs(d[2]) >= share * self.angle_rad
+        )
+
+    def mark(self, odom: np.ndarray) -> None:
+        self.last = np.array(odom, dtype=float)

@@ -47,9 +47,10 @@ from polyswarm.polymap import (
 from polyswarm.se2 import compose, inverse, relative, transform_points, wrap
 from polyswarm.slam import gridmatch
 from polyswarm.slam.evidence import EvidenceGrid, KeyframeRays, view_points
-from polyswarm.slam.follow import Atlas, CorrectionOp, correct, pose_of
+from polyswarm.slam.follow import Atlas, CorrectionOp, pose_of
 from polyswarm.slam.icp import IcpResult, PointToVectorIcp
-from polyswarm.slam.keyframe import keyframe_polygon
+from polyswarm.slam.keyframe import KeyframeSelector, keyframe_polygon
+from polyswarm.slam.loops import LoopClosing, rotate
 from polyswarm.slam.loopsearch import correlative_search
 from polyswarm.slam.odomscale import OdometryScale
 from polyswarm.slam.posegraph import PoseGraph
@@ -64,22 +65,13 @@ log = logging.getLogger(__name__)
 # any transport (a quaternion, float stamps) maps the same (ICP and the evidence match
 # are not continuous in their input's last bits)
 INPUT_DECIMALS = 9
-# a heading change of 1 rad moves the scan points 2 m away (typical indoor ranges) by
-# about 2 m: how loop corrections of heading and position are weighed against each other
-METRES_PER_RADIAN = 2.0
 ODOMETRY_SIGMA_PER_M = 0.1  # std of odometry along a corridor, per metre travelled
-WEAK_SIGMA_M = 100.0  # std of a loop edge along a corridor: no information there
 # a scan that sees new space (slam.keyframe_novelty) is a keyframe once the robot has
 # moved this share of the way to the next one...
 NOVELTY_MIN_STEP = 0.25
 # ... judged by its beams' ends pulled back this far towards the sensor (a wall already
 # mapped lies on the explored space's edge, its noisy returns on either side of it)
 NOVELTY_PULL_M = 0.2
-
-
-def _rotate(v, angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
 
 
 @dataclass(frozen=True)
@@ -97,50 +89,18 @@ class SlamStep:
     anchored: bool = False  # this step moved the SLAM into the frame ``anchor`` gave
 
 
-class KeyframeSelector:
-    """Stage 2: a new keyframe after enough travel or rotation (odometry)."""
-
-    def __init__(self, distance_m: float, angle_rad: float) -> None:
-        self.distance_m, self.angle_rad = distance_m, angle_rad
-        self.last: np.ndarray | None = None
-
-    def due(self, odom: np.ndarray) -> bool:
-        if self.last is None:
-            return True
-        d = relative(self.last, odom)
-        return bool(np.hypot(d[0], d[1]) >= self.distance_m or abs(d[2]) >= self.angle_rad)
-
-    def moved(self, odom: np.ndarray, share: float) -> bool:
-        """Has the robot moved ``share`` of the way to the next keyframe?"""
-        if self.last is None:
-            return True
-        d = relative(self.last, odom)
-        return bool(
-            np.hypot(d[0], d[1]) >= share * self.distance_m or abs(d[2]) >= share * self.angle_rad
-        )
-
-    def mark(self, odom: np.ndarray) -> None:
-        self.last = np.array(odom, dtype=float)
-
-
-# ICP from the odometry prediction fits poorly when the prediction is outside its basin:
-# csail's real wheel odometry is off by 15-30 degrees over some fast turns, and PolySLAM
-# on it ended 6.5 m off (ATE). Then a correlative search around the prediction seeds a
-# second ICP, kept when it matches clearly more points. Chosen a priori and checked on
-# the logs (real and synthetic odometry) and on simulated TurtleBot3 runs: it changed
-# only csail on its real odometry (ATE 6.49 -> 0.10 m)
+# ICP from outside its basin (csail's wheel odometry is 15-30 deg off over fast turns) is
+# seeded again by a correlative search around the prediction (csail ATE 6.49 -> 0.10 m)
 POOR_FIT_SHARE = 0.3  # ICP matched fewer than this share of the scan's points
 RESEED_WINDOW_M = 0.5  # the search window around the prediction: +-0.5 m ...
 RESEED_WINDOW_RAD = math.radians(30.0)  # ... and +-30 degrees, in 5 cm and 1 degree steps
 RESEED_GAIN = 1.25  # the second fit is kept if it matches this many times the points
-# the pose refined on the evidence's walls is kept unless fewer of the returns end on a
-# wall (within 0.1 m) there than at ICP's pose. Pose error p95 over TurtleBot3/4, Hokuyo
-# and Neato on office, furnished and nav2-depot (2 seeds): median 0.94 m without the
-# refinement, 0.525 m keeping it always, 0.505 m with this rule
+# the pose refined on the evidence's walls is kept unless fewer returns end on a wall
+# there than at ICP's pose (pose error p95 over 4 profiles: 0.94 m without, 0.505 m with)
 GRID_MARGIN = 0.0
 
 
-class PolySlam:
+class PolySlam(LoopClosing):
     def __init__(
         self,
         cfg: SlamConfig,
@@ -585,7 +545,7 @@ class PolySlam:
         tracked = res is not None and res.inliers > 0
         weak = None  # a corridor: along it the edge is only as good as the odometry
         if tracked and res.degenerate_axis is not None:
-            weak = _rotate(res.degenerate_axis, -prev[2])
+            weak = rotate(res.degenerate_axis, -prev[2])
         sigma_rad = lc.odometry_sigma_rad
         if tracked:
             sigma_rad = max(
@@ -603,94 +563,7 @@ class PolySlam:
         self._travel_since_loop_m += float(np.hypot(*z[:2]))
         if not lc.enabled or not loops or len(valid) == 0:
             return pose
-        # how far tracking may have drifted since the last loop: the wide search's window
-        window = lc.search_window(self._travel_since_loop_m)
-        # the old submap: keyframes near the pose, all older than min_age_keyframes
-        old = self.store.nearest(
-            pose,
-            node - lc.min_age_keyframes,
-            radius_m=lc.radius_m + window - lc.search_window_m,
-            limit=lc.keyframes,
-        )
-        if len(old) == 0:
-            return pose
-        s, e = self.store.vectors(old)
-        m = self.icp.align(valid, pose, s, e, origin)
-        ok = self._loop_accepted(m, pose, len(valid), window)
-        waited = min(node - self._last_loop, node - self._last_search)
-        if not ok and lc.search_window_m > 0 and waited >= lc.search_every_keyframes:
-            # tracking may have drifted beyond ICP's reach: search a wide window first
-            self._last_search = node
-            start, _, ambiguous = correlative_search(valid, pose, s, e, window)
-            if not ambiguous:
-                m = self.icp.align(valid, start, s, e, origin)
-                ok = self._loop_accepted(m, pose, len(valid), window)
-        if not ok:
-            return pose
-        self._last_loop = node
-        self._travel_since_loop_m = 0.0
-        shift = float(np.hypot(*(m.pose[:2] - pose[:2])))
-        anchor = int(old[0])
-        anchor_pose = self.store.keyframes[anchor].pose
-        self.graph.add_edge(
-            anchor,
-            node,
-            relative(anchor_pose, m.pose),
-            lc.loop_sigma_m,
-            lc.loop_sigma_rad,
-            loop=True,
-            # in a corridor the loop says nothing along it
-            weak_axis=None
-            if m.degenerate_axis is None
-            else _rotate(m.degenerate_axis, -anchor_pose[2]),
-            weak_sigma_m=WEAK_SIGMA_M,
-        )
-        if m.degenerate_axis is not None:  # keep the tracked position along the corridor
-            along = m.degenerate_axis @ (m.pose[:2] - pose[:2])
-            m = replace(m, pose=np.r_[m.pose[:2] - along * m.degenerate_axis, m.pose[2]])
-            shift = float(np.hypot(*(m.pose[:2] - pose[:2])))
-        turn = abs(float(wrap(m.pose[2] - pose[2])))
-        if shift + turn * METRES_PER_RADIAN < lc.optimise_above_m:
-            return pose  # the loop agrees with tracking: nothing to correct yet
-        log.debug("loop %d -> %d closed: moved %.3f m, %.2f deg", anchor, node, shift, turn)
-        return self._optimise_graph()
-
-    def _optimise_graph(self) -> np.ndarray:
-        """Optimise the pose graph, move the keyframes and the map with it (once per
-        keyframe step); the new keyframe's pose."""
-        self._optimise = False
-        poses = self.graph.optimise()
-        self.store.set_poses(poses[:-1])
-        if self.evidence is not None:
-            self.evidence.move_to(poses)
-        if self._follows:
-            self._follow()
-        return poses[-1]
-
-    def _follow(self) -> None:
-        """Merge again the cells of keyframes the optimisation moved (polyswarm.slam.follow)."""
-        kfs = self.store.keyframes
-        poses = {k: compose(kfs[k].pose, f) for k, f in self._frames.items()}
-        self.map, op, info = correct(self.map, self.atlas, poses)
-        if op is not None:
-            if self._correction is not None:  # one optimisation per keyframe: never here
-                raise PolyswarmError("two corrections in one keyframe step")
-            self._correction = op
-            self.corrections.append(info)
-
-    def _loop_accepted(self, m: IcpResult, pose, n_points: int, window_m: float) -> bool:
-        lc = self.cfg.loop_closure
-        return bool(
-            m.converged
-            and m.inliers >= lc.min_inlier_fraction * n_points
-            and m.rmse_m <= lc.max_rmse_m
-            and np.hypot(*(m.pose[:2] - pose[:2]))
-            <= lc.max_correction_m + window_m - lc.search_window_m
-        )
-
-    @property
-    def loops_closed(self) -> int:
-        return self.graph.loop_edges
+        return self._close_loop(node, pose, valid, origin)
 
     def trajectory(self) -> np.ndarray:
         """Every processed scan's pose with all pose-graph corrections applied."""
@@ -698,27 +571,6 @@ class PolySlam:
             raise PolyswarmError("trajectory() needs PolySlam(..., keep_trajectory=True)")
         kf = self.graph.poses
         return np.array([compose(kf[i], off) for i, off in self._steps]).reshape(-1, 3)
-
-    def rebuild_map(self) -> GridPolyMap:
-        """A new map of every keyframe merged at its optimised pose, ``rebuild_batch``
-        consecutive keyframes a pass (a batch that fails is merged one by one)."""
-        pmap = GridPolyMap(self.map.cell_size)
-        kfs = self.store.keyframes
-        step = self.cfg.rebuild_batch
-        for k0 in range(0, len(kfs), step):
-            polys = [kf.polygon_in_map() for kf in kfs[k0 : k0 + step]]
-            try:
-                pmap = pmap.merge_many(polys, self.merge_options).map
-                continue
-            except PolyswarmError as e:
-                log.info("keyframes %d-%d merged one by one: %s", k0, k0 + len(polys) - 1, e)
-            for k, poly in enumerate(polys, start=k0):
-                try:
-                    pmap = pmap.merge(poly, self.merge_options).map
-                except PolyswarmError as e:
-                    self.rejected_keyframes += 1
-                    log.warning("keyframe %d not merged into the rebuilt map: %s", k, e)
-        return pmap
 
 
 def _stage_ms(t: dict[str, float]) -> dict[str, float]:
