@@ -73,9 +73,7 @@ from agents.audits import Audit, Audits, log_evidence
 from agents.framematch import Matched, contradicted_where, match_frame
 from polyswarm.config import Config
 from polyswarm.errors import PolyswarmError
-from polyswarm.frames.mapmatch import (
-    FrameEstimate,
-)
+from polyswarm.frames.estimate import FrameEstimate
 from polyswarm.frames.sighting import (
     MIN_CONTRADICTIONS,
     Sighting,

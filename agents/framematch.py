@@ -8,14 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from polyswarm.errors import PolyswarmError
-from polyswarm.frames.mapmatch import (
-    MIN_SEEN,
-    MapMatch,
-    MatchError,
-    fitting_rivals,
-    match_maps,
-    verdict_at,
-)
+from polyswarm.frames.estimate import MIN_SEEN
+from polyswarm.frames.mapmatch import MapMatch, MatchError, fitting_rivals, match_maps, verdict_at
 from polyswarm.frames.sighting import MIN_CONTRADICTIONS, Room, Track
 from polyswarm.frames.sighting import contradicted_where as sighting_contradicted_where
 

@@ -512,13 +512,8 @@ def test_a_match_proposes_the_image_of_the_frame_the_robots_saw_each_other_at():
     """A square room fits four ways; when the robots saw each other only where an image
     that did not score best puts them, the match proposes that image."""
     from agents.framematch import match_frame as _match
-    from polyswarm.frames.mapmatch import (
-        MIN_SEEN,
-        fitting_rivals,
-        frame_error,
-        match_maps,
-        verdict_at,
-    )
+    from polyswarm.frames.estimate import MIN_SEEN
+    from polyswarm.frames.mapmatch import fitting_rivals, frame_error, match_maps, verdict_at
     from polyswarm.polymap import Ring, TypedPolygon, VectorType
 
     xy = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]])

@@ -11,15 +11,8 @@ import shapely
 import shapely.affinity
 from shapely.geometry import box
 
-from polyswarm.frames.mapmatch import (
-    MIN_SEEN,
-    FrameEstimate,
-    MapMatch,
-    fit_at,
-    frame_error,
-    match_maps,
-    transform_map,
-)
+from polyswarm.frames.estimate import MIN_SEEN, FrameEstimate
+from polyswarm.frames.mapmatch import MapMatch, fit_at, frame_error, match_maps, transform_map
 from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
 from polyswarm.se2 import inverse
 

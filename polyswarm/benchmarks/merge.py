@@ -111,7 +111,8 @@ def _score(est, truth) -> dict:
 def _pair_moments(moments: list, k: int, truth: np.ndarray, tracks: list) -> list[dict]:
     """Both methods on robot 1's and robot k's maps at every moment."""
     from polyswarm.benchmarks.gridmerge import Features, match_grids
-    from polyswarm.frames.mapmatch import MIN_OVERLAP_M2, FrameEstimate, MatchError, match_maps
+    from polyswarm.frames.estimate import FrameEstimate
+    from polyswarm.frames.mapmatch import MIN_OVERLAP_M2, MatchError, match_maps
     from polyswarm.frames.sighting import (
         MIN_CONTRADICTIONS,
         Room,

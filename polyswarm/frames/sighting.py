@@ -20,7 +20,7 @@ always reaches a wall, whose returns would otherwise hide every prediction.
 ``seen`` counts the opposite, positive evidence: a return where the frame puts the other
 robot, clear of the viewer's walls. A frame is committed only when the robots have seen
 each other in a few places where it puts them (``distinct_places``;
-``polyswarm.frames.mapmatch.FrameEstimate``); robots exploring apart seldom see each other, so
+``polyswarm.frames.estimate.FrameEstimate``); robots exploring apart seldom see each other, so
 the coordinator sends a waiting robot towards where its candidate frame puts the others
 (``agents.anchoring``).
 
