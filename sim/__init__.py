@@ -9,9 +9,8 @@ from sim.simulation import (
     Robot,
     ScanEvent,
     Simulation,
-    scattered_start_poses,
-    spread_start_poses,
 )
+from sim.starts import scattered_start_poses, spread_start_poses
 from sim.world import PROCEDURAL, World, load_world, procedural_world, world_from_grid
 
 __all__ = [
