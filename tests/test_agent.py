@@ -7,7 +7,8 @@ from dataclasses import replace
 import numpy as np
 
 from agents.behaviour import MAX_RECOVERIES, STUCK_TIMEOUT_S
-from agents.robot import PEER_FRESH_S, RobotAgent
+from agents.peers import PEER_FRESH_S
+from agents.robot import RobotAgent
 from polyswarm.config import Config
 from polyswarm.polymap import VectorType
 from protocols.messages import Assignment, AssignmentKind, Odometry, Pose, RobotState
