@@ -44,6 +44,89 @@ def session_spec(listen, connect, zconf: str, default: str, router: bool):
     return SessionSpec.router(default, zconf) if router else SessionSpec.client(default, zconf)
 
 
+def _replay(replay: Path, cfg, robot_id: str, rate: float, scan_topic, odom_topic):
+    """``agent --replay``: the configuration for the recording (a bag's mount and
+    no-return value), the function that attaches its player to the agent's session, and
+    the recording's start pose (x,y,theta)."""
+    import dataclasses
+    import threading
+
+    from polyswarm.runners.replay import BagPlayer, LogPlayer, start_player
+    from protocols.bags import is_bag
+    from protocols.keys import SwarmKeys
+    from protocols.tf import choose_mount
+
+    if is_bag(replay):
+        # the bag's messages arrive as ROS 2 CDR, as from a robot through the bridge
+        io = dataclasses.replace(cfg.agent, source="ros2", output="native")
+        player = BagPlayer(replay, io, rate, scan_topic, odom_topic)
+        mount, _ = choose_mount(cfg.slam.mount, player.bag.mounts, str(replay))
+        lidar = dataclasses.replace(cfg.sim.lidar, out_of_range=player.bag.no_return)
+        cfg = dataclasses.replace(
+            cfg,
+            agent=io,
+            slam=dataclasses.replace(cfg.slam, mount=mount),
+            sim=dataclasses.replace(cfg.sim, lidar=lidar),
+        )
+    else:
+        player = LogPlayer(replay, rate)
+        # the log's scans arrive as native messages; commands carry the acknowledgements
+        cfg = dataclasses.replace(
+            cfg, agent=dataclasses.replace(cfg.agent, source="native", output="native")
+        )
+    me = SwarmKeys(cfg.comms.swarm).robot(robot_id)
+
+    def attach(session, agent, stop_event):
+        _thread, bus, sub = start_player(player, session, me, stop_event)
+
+        def finish() -> None:  # all scans published and processed: stop the agent
+            player.done.wait()
+            deadline = threading.Event()
+            for _ in range(600):
+                if agent.stats.scans >= player.published or stop_event.is_set():
+                    break
+                deadline.wait(0.1)
+            stop_event.set()
+
+        threading.Thread(target=finish, daemon=True).start()
+
+        def detach() -> None:
+            sub.undeclare()
+            bus.close()
+
+        return detach
+
+    return cfg, attach, ",".join(str(v) for v in player.start_pose)
+
+
+def _agent_start(start: str | None, cfg, robot_id: str):
+    """The agent's start pose and whether it is in the shared frame: --start, else
+    [[robots]], else (0, 0, 0) in a frame of its own (the coordinator finds it)."""
+    import logging
+
+    from polyswarm.config import known_starts
+
+    pose = _pose(start)
+    frame_known = True
+    if pose is None:
+        starts = known_starts(cfg.robots)
+        if robot_id not in starts:
+            logging.getLogger("polyswarm").warning(
+                "no start pose for %s (no --start, not in [[robots]]): using (0, 0, 0)", robot_id
+            )
+            pose = (0.0, 0.0, 0.0)
+        elif starts[robot_id] is None:
+            logging.getLogger("polyswarm").info(
+                "%s: start pose not given: mapping in its own frame until the coordinator "
+                "finds it in the shared map",
+                robot_id,
+            )
+            pose, frame_known = (0.0, 0.0, 0.0), False
+        else:
+            pose = tuple(starts[robot_id])
+    return pose, frame_known
+
+
 @app.command("agent")
 def agent_cmd(
     robot_id: str = typer.Option(..., "--id", help="Robot id (a key chunk, e.g. r1)."),
@@ -80,85 +163,20 @@ def agent_cmd(
     ),
 ) -> None:
     """Run a robot agent: PolySLAM, map deltas, planning and local control over Zenoh."""
-    import dataclasses
-    import logging
-    import threading
 
     from agents.agent_node import run_agent
     from agents.session import stop_on_signals
-    from polyswarm.config import known_starts, load_config
-    from protocols.keys import SwarmKeys, check_name
+    from polyswarm.config import load_config
+    from protocols.keys import check_name
 
     check_name(robot_id, "robot id")
     cfg = load_config(config)
     attach = None
     stop = stop_on_signals()
-    player = None
     if replay is not None:
-        from polyswarm.runners.replay import BagPlayer, LogPlayer, start_player
-        from protocols.bags import is_bag
-        from protocols.tf import choose_mount
-
-        if is_bag(replay):
-            # the bag's messages arrive as ROS 2 CDR, as from a robot through the bridge
-            io = dataclasses.replace(cfg.agent, source="ros2", output="native")
-            player = BagPlayer(replay, io, rate, scan_topic, odom_topic)
-            mount, _ = choose_mount(cfg.slam.mount, player.bag.mounts, str(replay))
-            lidar = dataclasses.replace(cfg.sim.lidar, out_of_range=player.bag.no_return)
-            cfg = dataclasses.replace(
-                cfg,
-                agent=io,
-                slam=dataclasses.replace(cfg.slam, mount=mount),
-                sim=dataclasses.replace(cfg.sim, lidar=lidar),
-            )
-        else:
-            player = LogPlayer(replay, rate)
-            # the log's scans arrive as native messages; commands carry the acknowledgements
-            cfg = dataclasses.replace(
-                cfg, agent=dataclasses.replace(cfg.agent, source="native", output="native")
-            )
-        me = SwarmKeys(cfg.comms.swarm).robot(robot_id)
-
-        def attach(session, agent, stop_event):
-            _thread, bus, sub = start_player(player, session, me, stop_event)
-
-            def finish() -> None:  # all scans published and processed: stop the agent
-                player.done.wait()
-                deadline = threading.Event()
-                for _ in range(600):
-                    if agent.stats.scans >= player.published or stop_event.is_set():
-                        break
-                    deadline.wait(0.1)
-                stop_event.set()
-
-            threading.Thread(target=finish, daemon=True).start()
-
-            def detach() -> None:
-                sub.undeclare()
-                bus.close()
-
-            return detach
-
-        if start is None:
-            start = ",".join(str(v) for v in player.start_pose)
-    pose = _pose(start)
-    frame_known = True
-    if pose is None:
-        starts = known_starts(cfg.robots)
-        if robot_id not in starts:
-            logging.getLogger("polyswarm").warning(
-                "no start pose for %s (no --start, not in [[robots]]): using (0, 0, 0)", robot_id
-            )
-            pose = (0.0, 0.0, 0.0)
-        elif starts[robot_id] is None:
-            logging.getLogger("polyswarm").info(
-                "%s: start pose not given: mapping in its own frame until the coordinator "
-                "finds it in the shared map",
-                robot_id,
-            )
-            pose, frame_known = (0.0, 0.0, 0.0), False
-        else:
-            pose = tuple(starts[robot_id])
+        cfg, attach, replay_start = _replay(replay, cfg, robot_id, rate, scan_topic, odom_topic)
+        start = start or replay_start
+    pose, frame_known = _agent_start(start, cfg, robot_id)
     zconf = str(zenoh_config or cfg.comms.zenoh_config or "")
     spec = session_spec(listen, connect, zconf, cfg.comms.endpoint, router=False)
     agent = run_agent(
@@ -268,97 +286,12 @@ def coordinator_cmd(
     exit_now()  # state saved, session closed: no slow teardown
 
 
-@app.command("launch")
-def launch_cmd(
-    robots: int = typer.Option(3, min=1, max=20, help="Number of robots."),
-    world: str = typer.Option(
-        "office", help="Procedural world name, data:NAME (../shared/data/worlds) or a .yaml."
-    ),
-    strategy: str = typer.Option("hungarian", help="hungarian, greedy or nearest."),
-    seed: int = typer.Option(0, help="Seed of the sensor and odometry noise (and maze)."),
-    speed: float = typer.Option(
-        10.0, help="Simulated seconds per wall second, at most (0: as fast as possible)."
-    ),
-    gui: bool = typer.Option(False, "--gui", help="Show the pybullet GUI (needs a display)."),
-    time_limit: float = typer.Option(
-        math.inf, "--time-limit", help="Stop after this many simulated seconds."
-    ),
-    wall_limit: float = typer.Option(
-        math.inf, "--wall-limit", help="Stop after this many wall-clock seconds."
-    ),
-    stop_coverage: float = typer.Option(
-        0.0, help="Stop once this fraction of the free space is explored (0: at mission end)."
-    ),
-    out: Path | None = typer.Option(None, help="Run folder (default runs/<timestamp>/)."),
-    config: Path | None = CONFIG_OPT,
-    profile: str | None = typer.Option(None, help=PROFILE_HELP),
-    fault: str = typer.Option(
-        "",
-        help="Inject faults: action:process@simulated-seconds, comma separated; actions "
-        "kill, stop, cont, restart (e.g. kill:r2@20,restart:r2@30); with --netns also cut "
-        "and restore a host's link.",
-    ),
-    link_faults: str = typer.Option(
-        "",
-        help="Lose, duplicate and reorder received messages at the coordinator and agents "
-        "(probabilities), e.g. drop=0.1,dup=0.05,reorder=0.05.",
-    ),
-    wrong_anchor: str = typer.Option(
-        "",
-        help="With --unknown-start, a fault injection: commit ROBOT's first frame DX metres, "
-        "DY metres and DEG degrees off (ROBOT:DX,DY,DEG, e.g. r2:2,1,20); its merge is undone "
-        "once the robots' sightings contradict it.",
-    ),
-    start_error: str = typer.Option(
-        "",
-        help="Tell the swarm ROBOT's start DX metres, DY metres and DEG degrees off where it "
-        "stands (ROBOT:DX,DY,DEG, e.g. r2:0.3,-0.2,3): a start measured badly; the joint pose "
-        "graph pulls its map onto the others'.",
-    ),
-    restart: bool = typer.Option(
-        True,
-        help="Restart a process that exits unexpectedly, with backoff, as systemd would on a "
-        "robot (--no-restart: stop the mission instead, for debugging).",
-    ),
-    view_port: int | None = typer.Option(
-        None,
-        "--view",
-        min=0,
-        max=65535,
-        help="Also serve the live view in a browser on this port of 127.0.0.1 (polyswarm view).",
-    ),
-    unknown_start: bool = typer.Option(
-        False,
-        "--unknown-start",
-        help="Place the robots at scattered random starts (seeded, 10 m apart where the world "
-        "allows, random headings) and tell nobody: the coordinator finds each robot's frame by "
-        "matching its map with the merged map (the first robot's start is the map's origin).",
-    ),
-    netns: bool = typer.Option(
-        False,
-        "--netns",
-        help="Each robot and the coordinator on a host of its own: a network namespace whose "
-        "only link to the others is wifi0 on one bridge; Zenoh routers in a mesh (needs root). "
-        "Cut links with --fault cut:r1@60,restore:r1@120.",
-    ),
-    coordinators: int = typer.Option(
-        1,
-        min=1,
-        max=9,
-        help="Coordinators: the first active, the others (coordinator2, ...) standing by to "
-        "take over when it is gone (e.g. --fault kill:coordinator@60,cut:coordinator@60).",
-    ),
-) -> None:
-    """Explore a simulated world with N robots: coordinator, sim and agents as processes.
-
-    Ctrl-C, SIGTERM or SIGHUP (also when launched in the background, where the shell
-    ignores SIGINT) stops every process and still writes the run folder."""
-    from rich.console import Console
-    from rich.live import Live
-    from rich.table import Table
-
+def _check_launch_args(strategy: str, link_faults: str, wrong_anchor: str, start_error: str):
+    """Refuse a bad --strategy, --link-faults, --wrong-anchor or --start-error with a
+    one-line error here, not in the children."""
+    from agents.anchoring import robot_offset, wrong_anchor_fault
+    from agents.session import LinkFaults
     from polyswarm.explore.assign import Strategy
-    from polyswarm.runners.launch import Fault, LaunchOptions, launch
 
     try:
         Strategy(strategy)
@@ -366,65 +299,41 @@ def launch_cmd(
         raise ConfigError(
             f"--strategy must be hungarian, greedy or nearest, not {strategy!r}"
         ) from None
-    from agents.session import LinkFaults, stop_on_signals
-
-    LinkFaults.parse(link_faults)  # a bad specification fails here, not in the children
-    from agents.anchoring import robot_offset, wrong_anchor_fault
-
+    LinkFaults.parse(link_faults)
     wrong_anchor_fault(wrong_anchor)
     robot_offset(start_error, "start error")
-    opts = LaunchOptions(
-        world,
-        robots,
-        strategy,
-        seed,
-        speed,
-        gui,
-        time_limit,
-        wall_limit,
-        stop_coverage,
-        out,
-        load_cfg(config, profile),
-        faults=Fault.parse_many(fault),
-        link_faults=link_faults,
-        wrong_anchor=wrong_anchor,
-        view_port=view_port,
-        restart=restart,
-        unknown_start=unknown_start,
-        start_error=start_error,
-        netns=netns,
-        coordinators=coordinators,
-    )
-    console = Console(stderr=True)
-    if view_port is not None:
-        console.print(f"live view: http://127.0.0.1:{view_port}/")
 
-    def view(obs, wall: float) -> Table:
-        cov = obs.coverage[-1][1] if obs.coverage else 0.0
-        t = Table(
-            title=(
-                f"{world}: {robots} {opts.config.profile} robot(s), {strategy} | "
-                f"coverage {100 * cov:.1f} % | "
-                f"sim {obs.sim_t:.0f} s | wall {wall:.0f} s | {obs.mission}"
-            )
+
+def _live_table(opts, obs, wall: float):
+    """The launch's live table: coverage, times and each robot's state."""
+    from rich.table import Table
+
+    cov = obs.coverage[-1][1] if obs.coverage else 0.0
+    t = Table(
+        title=(
+            f"{opts.world}: {opts.robots} {opts.config.profile} robot(s), {opts.strategy} | "
+            f"coverage {100 * cov:.1f} % | "
+            f"sim {obs.sim_t:.0f} s | wall {wall:.0f} s | {obs.mission}"
         )
-        for col in ("robot", "state", "target", "keyframes", "path m", "bytes sent"):
-            t.add_column(col, justify="right")
-        for rid, v in obs.robots.items():
-            t.add_row(
-                rid,
-                v.state,
-                str(v.target),
-                str(v.keyframes),
-                f"{v.path_length_m:.1f}",
-                f"{v.bytes_sent:,}",
-            )
-        return t
+    )
+    for col in ("robot", "state", "target", "keyframes", "path m", "bytes sent"):
+        t.add_column(col, justify="right")
+    for rid, v in obs.robots.items():
+        t.add_row(
+            rid,
+            v.state,
+            str(v.target),
+            str(v.keyframes),
+            f"{v.path_length_m:.1f}",
+            f"{v.bytes_sent:,}",
+        )
+    return t
 
-    stop = stop_on_signals(hangup=True)  # the launch ends as at its limits: outputs written
-    with Live(console=console, refresh_per_second=2, transient=False) as live:
-        res = launch(opts, progress=lambda obs, wall: live.update(view(obs, wall)), stop=stop)
-    m = res.metrics
+
+def _results_table(m: dict):
+    """The launch's results: coverage, t99, IoU, bytes, faults."""
+    from rich.table import Table
+
     table = Table(title=f"exploration of {m['world']} ({m['stopped_because']})")
     table.add_column("metric")
     table.add_column("value", justify="right")
@@ -459,7 +368,154 @@ def launch_cmd(
         table.add_row("merges undone (frames withdrawn)", ", ".join(undone))
     if m["unanchored"]:
         table.add_row("frames never found", ", ".join(m["unanchored"]))
-    Console().print(table)
+    return table
+
+
+# the options of launch that need a paragraph of help
+FAULT_OPT = typer.Option(
+    "",
+    help="Inject faults: action:process@simulated-seconds, comma separated; actions "
+    "kill, stop, cont, restart (e.g. kill:r2@20,restart:r2@30); with --netns also cut "
+    "and restore a host's link.",
+)
+
+LINK_FAULTS_OPT = typer.Option(
+    "",
+    help="Lose, duplicate and reorder received messages at the coordinator and agents "
+    "(probabilities), e.g. drop=0.1,dup=0.05,reorder=0.05.",
+)
+
+WRONG_ANCHOR_OPT = typer.Option(
+    "",
+    help="With --unknown-start, a fault injection: commit ROBOT's first frame DX metres, "
+    "DY metres and DEG degrees off (ROBOT:DX,DY,DEG, e.g. r2:2,1,20); its merge is undone "
+    "once the robots' sightings contradict it.",
+)
+
+START_ERROR_OPT = typer.Option(
+    "",
+    help="Tell the swarm ROBOT's start DX metres, DY metres and DEG degrees off where it "
+    "stands (ROBOT:DX,DY,DEG, e.g. r2:0.3,-0.2,3): a start measured badly; the joint pose "
+    "graph pulls its map onto the others'.",
+)
+
+RESTART_OPT = typer.Option(
+    True,
+    help="Restart a process that exits unexpectedly, with backoff, as systemd would on a "
+    "robot (--no-restart: stop the mission instead, for debugging).",
+)
+
+VIEW_PORT_OPT = typer.Option(
+    None,
+    "--view",
+    min=0,
+    max=65535,
+    help="Also serve the live view in a browser on this port of 127.0.0.1 (polyswarm view).",
+)
+
+UNKNOWN_START_OPT = typer.Option(
+    False,
+    "--unknown-start",
+    help="Place the robots at scattered random starts (seeded, 10 m apart where the world "
+    "allows, random headings) and tell nobody: the coordinator finds each robot's frame by "
+    "matching its map with the merged map (the first robot's start is the map's origin).",
+)
+
+NETNS_OPT = typer.Option(
+    False,
+    "--netns",
+    help="Each robot and the coordinator on a host of its own: a network namespace whose "
+    "only link to the others is wifi0 on one bridge; Zenoh routers in a mesh (needs root). "
+    "Cut links with --fault cut:r1@60,restore:r1@120.",
+)
+
+COORDINATORS_OPT = typer.Option(
+    1,
+    min=1,
+    max=9,
+    help="Coordinators: the first active, the others (coordinator2, ...) standing by to "
+    "take over when it is gone (e.g. --fault kill:coordinator@60,cut:coordinator@60).",
+)
+
+
+@app.command("launch")
+def launch_cmd(
+    robots: int = typer.Option(3, min=1, max=20, help="Number of robots."),
+    world: str = typer.Option(
+        "office", help="Procedural world name, data:NAME (../shared/data/worlds) or a .yaml."
+    ),
+    strategy: str = typer.Option("hungarian", help="hungarian, greedy or nearest."),
+    seed: int = typer.Option(0, help="Seed of the sensor and odometry noise (and maze)."),
+    speed: float = typer.Option(
+        10.0, help="Simulated seconds per wall second, at most (0: as fast as possible)."
+    ),
+    gui: bool = typer.Option(False, "--gui", help="Show the pybullet GUI (needs a display)."),
+    time_limit: float = typer.Option(
+        math.inf, "--time-limit", help="Stop after this many simulated seconds."
+    ),
+    wall_limit: float = typer.Option(
+        math.inf, "--wall-limit", help="Stop after this many wall-clock seconds."
+    ),
+    stop_coverage: float = typer.Option(
+        0.0, help="Stop once this fraction of the free space is explored (0: at mission end)."
+    ),
+    out: Path | None = typer.Option(None, help="Run folder (default runs/<timestamp>/)."),
+    config: Path | None = CONFIG_OPT,
+    profile: str | None = typer.Option(None, help=PROFILE_HELP),
+    fault: str = FAULT_OPT,
+    link_faults: str = LINK_FAULTS_OPT,
+    wrong_anchor: str = WRONG_ANCHOR_OPT,
+    start_error: str = START_ERROR_OPT,
+    restart: bool = RESTART_OPT,
+    view_port: int | None = VIEW_PORT_OPT,
+    unknown_start: bool = UNKNOWN_START_OPT,
+    netns: bool = NETNS_OPT,
+    coordinators: int = COORDINATORS_OPT,
+) -> None:
+    """Explore a simulated world with N robots: coordinator, sim and agents as processes.
+
+    Ctrl-C, SIGTERM or SIGHUP (also when launched in the background, where the shell
+    ignores SIGINT) stops every process and still writes the run folder."""
+    from rich.console import Console
+    from rich.live import Live
+
+    from agents.session import stop_on_signals
+    from polyswarm.runners.launch import Fault, LaunchOptions, launch
+
+    _check_launch_args(strategy, link_faults, wrong_anchor, start_error)
+    opts = LaunchOptions(
+        world,
+        robots,
+        strategy,
+        seed,
+        speed,
+        gui,
+        time_limit,
+        wall_limit,
+        stop_coverage,
+        out,
+        load_cfg(config, profile),
+        faults=Fault.parse_many(fault),
+        link_faults=link_faults,
+        wrong_anchor=wrong_anchor,
+        view_port=view_port,
+        restart=restart,
+        unknown_start=unknown_start,
+        start_error=start_error,
+        netns=netns,
+        coordinators=coordinators,
+    )
+    console = Console(stderr=True)
+    if view_port is not None:
+        console.print(f"live view: http://127.0.0.1:{view_port}/")
+
+    stop = stop_on_signals(hangup=True)  # the launch ends as at its limits: outputs written
+    with Live(console=console, refresh_per_second=2, transient=False) as live:
+        res = launch(
+            opts, progress=lambda obs, wall: live.update(_live_table(opts, obs, wall)), stop=stop
+        )
+    m = res.metrics
+    Console().print(_results_table(m))
     typer.echo(f"wrote {res.out}", err=True)
     if m["crashed_processes"]:  # a process that died for good fails the launch
         raise SimulationError(f"process(es) died for good: {', '.join(m['crashed_processes'])}")
