@@ -171,6 +171,31 @@ def bench_nav(
     )
 
 
+def _bandwidth_table(results: list[dict]):
+    """Cumulative bytes of every scheme per run, and PolyMap's ratios."""
+    from rich.table import Table
+
+    from polyswarm.benchmarks import bandwidth as bw
+
+    t = Table(title="Bytes sent for the same map updates (cumulative)")
+    t.add_column("run")
+    for s in bw.SCHEMES:
+        t.add_column(s.replace("_", " "), justify="right")
+    t.add_column("PolyMap / best baseline", justify="right")
+    t.add_column("PolyMap / best grid delta", justify="right")
+    t.add_column("map / PNG", justify="right")
+    for r in results:
+        c = r["cumulative_bytes"]
+        t.add_row(
+            r["name"],
+            *[bw.fmt_bytes(c[s]) for s in bw.SCHEMES],
+            f"{r['delta_bytes_ratio_vs_best_baseline']:.3f} ({r['best_baseline']})",
+            f"{r['delta_bytes_ratio_vs_best_grid']:.3f}",
+            f"{r['map_bytes_ratio_vs_png']:.2f}",
+        )
+    return t
+
+
 @bench_app.command("bandwidth")
 def bench_bandwidth(
     as_json: bool = JSON_OPT,
@@ -225,25 +250,7 @@ def bench_bandwidth(
     if as_json:
         typer.echo(json.dumps(summary, indent=2, default=float))
         return
-    from rich.table import Table
-
-    t = Table(title="Bytes sent for the same map updates (cumulative)")
-    t.add_column("run")
-    for s in bw.SCHEMES:
-        t.add_column(s.replace("_", " "), justify="right")
-    t.add_column("PolyMap / best baseline", justify="right")
-    t.add_column("PolyMap / best grid delta", justify="right")
-    t.add_column("map / PNG", justify="right")
-    for r in results:
-        c = r["cumulative_bytes"]
-        t.add_row(
-            r["name"],
-            *[bw.fmt_bytes(c[s]) for s in bw.SCHEMES],
-            f"{r['delta_bytes_ratio_vs_best_baseline']:.3f} ({r['best_baseline']})",
-            f"{r['delta_bytes_ratio_vs_best_grid']:.3f}",
-            f"{r['map_bytes_ratio_vs_png']:.2f}",
-        )
-    Console().print(t)
+    Console().print(_bandwidth_table(results))
     for r in results:
         if r["merges_sent"]:
             console.print(

@@ -12,24 +12,125 @@ from polyswarm.cli import app, bench_app
 from polyswarm.cli.bench_cmds import JSON_OPT, SAVE_OPT, _emit, _names, _save
 
 
+def _explore_progress(console, status):
+    """The callback that shows each exploration run starting and its result."""
+
+    def on_run(k, n, spec, row) -> None:
+        what = (
+            f"{spec.world}, {spec.profile}, {spec.robots} robot(s), {spec.strategy}, "
+            f"seed {spec.seed}"
+        )
+        if row is None:
+            status.update(f"run {k + 1}/{n}: {what}")
+        else:
+            t99 = "never" if row["t99_s"] is None else f"{row['t99_s']:.1f} s"
+            console.log(
+                f"{what}: t99 {t99} (reference {row['reference_t99_s']} s), coverage "
+                f"{row['final_coverage']:.3f}, wall {row['wall_time_s']:.0f} s"
+            )
+
+    return on_run
+
+
+def _num(v, fmt: str) -> str:
+    return "-" if v is None else format(v, fmt)
+
+
+def _explore_table(res: dict, seeds: int):
+    """t99 against the reference per profile, world and robot count."""
+    from rich.table import Table
+
+    t = Table(title=f"Exploration, t99 over {seeds} seed(s) (simulated s)")
+    for col in ("profile", "world", "robots", "t99 median", "reference", "ratio", "worst ratio"):
+        t.add_column(col, justify="right")
+    t.add_column("success", justify="right")
+    for prof, ws in res["profiles"].items():
+        for w, by_n in ws.items():
+            for n, d in by_n.items():
+                t.add_row(
+                    prof,
+                    w,
+                    n,
+                    _num(d["t99_median_s"], ".0f"),
+                    _num(d["reference_t99_s"], ".0f"),
+                    _num(d["t99_ratio_vs_reference"], ".2f"),
+                    _num(d["t99_ratio_vs_reference_worst"], ".2f"),
+                    f"{d['success_rate']:.2f}",
+                )
+    return t
+
+
+def _explore_rows(res: dict) -> list[tuple[str, str]]:
+    """The exploration summary: success, IoU, collisions, ratios, coordinator load."""
+    rows = [
+        ("success rate (99 %, no collision, no crash, IoU)", f"{res['success_rate']:.2f}"),
+        ("map IoU, worst run", _num(res["map_iou_min"], ".3f")),
+        ("reachable area unexplored, worst run", _num(res["unexplored_reachable_m2_max"], ".1f")),
+        ("wall collisions (all runs)", str(res["wall_collisions"])),
+        ("runs with a crashed process", str(res["crashed_runs"])),
+    ]
+    rows += [(f"t99 3 vs 1 robot, {w}", f"{v:.2f}") for w, v in res["t99_ratio_3_vs_1"].items()]
+    rows += [
+        (f"t99 hungarian vs nearest, {w}", f"{v:.2f}")
+        for w, v in res["t99_ratio_vs_nearest"].items()
+    ]
+    if "coordinator_load" in res:
+        ld = res["coordinator_load"]
+        rows.append(
+            (
+                f"coordinator cycle, {ld['robots']} robots, p50 / p95",
+                f"{ld['cycle_p50_ms']:.0f} / {ld['cycle_p95_ms']:.0f} ms",
+            )
+        )
+    return rows
+
+
+EXPLORE_WORLDS_OPT = typer.Option(
+    "data:loop,data:cross,data:maze,data:zigzag,office,rooms",
+    help="Worlds, comma separated (data:NAME, procedural names or .yaml paths).",
+)
+
+EXPLORE_PROFILE_OPT = typer.Option(
+    "thesis",
+    help="Robot profiles, comma separated (thesis, turtlebot3, turtlebot4, hokuyo, "
+    "thesis-noisy-odometry).",
+)
+
+EXPLORE_UNKNOWN_START_OPT = typer.Option(
+    False,
+    "--unknown-start",
+    help="Instead: each run twice from the same scattered random starts, told and not "
+    "told (launch --unknown-start); frames found, wrong merges, t99 ratio.",
+)
+
+EXPLORE_WRONG_ANCHOR_OPT = typer.Option(
+    "",
+    help="With --unknown-start, a fault injection in the runs not told: ROBOT's first "
+    "frame sent DX m, DY m and DEG degrees off (ROBOT:DX,DY,DEG); merges undone counted.",
+)
+
+EXPLORE_CONFIG_OPT = typer.Option(
+    None, "--config", "-c", help="TOML config the runs start from (profiles apply on it)."
+)
+
+EXPLORE_START_ERROR_OPT = typer.Option(
+    "",
+    help="In the runs with the starts told, tell ROBOT's start DX metres, DY metres and "
+    "DEG degrees off where it stands (ROBOT:DX,DY,DEG): a start measured badly.",
+)
+
+
 @bench_app.command("explore")
 def bench_explore(
     as_json: bool = JSON_OPT,
     save: str | None = SAVE_OPT,
-    worlds: str = typer.Option(
-        "data:loop,data:cross,data:maze,data:zigzag,office,rooms",
-        help="Worlds, comma separated (data:NAME, procedural names or .yaml paths).",
-    ),
+    worlds: str = EXPLORE_WORLDS_OPT,
     robots: str = typer.Option("1,3", help="Robot counts, comma separated."),
     seeds: int = typer.Option(5, min=1, help="Seeds per world and robot count."),
     first_seed: int = typer.Option(
         0, min=0, help="First seed (runs seeds FIRST_SEED .. FIRST_SEED + SEEDS - 1)."
     ),
-    profile: str = typer.Option(
-        "thesis",
-        help="Robot profiles, comma separated (thesis, turtlebot3, turtlebot4, hokuyo, "
-        "thesis-noisy-odometry).",
-    ),
+    profile: str = EXPLORE_PROFILE_OPT,
     nearest: bool = typer.Option(
         True, help="Also run the nearest-frontier baseline (3 robots, maze and loop)."
     ),
@@ -40,25 +141,10 @@ def bench_explore(
     load_robots: int = typer.Option(10, help="Robots of the coordinator load test (0: skip)."),
     load_time: float = typer.Option(60.0, help="Simulated seconds of the load test."),
     out: Path = typer.Option(None, help="Folder of the runs (default: a temporary folder)."),
-    unknown_start: bool = typer.Option(
-        False,
-        "--unknown-start",
-        help="Instead: each run twice from the same scattered random starts, told and not "
-        "told (launch --unknown-start); frames found, wrong merges, t99 ratio.",
-    ),
-    wrong_anchor: str = typer.Option(
-        "",
-        help="With --unknown-start, a fault injection in the runs not told: ROBOT's first "
-        "frame sent DX m, DY m and DEG degrees off (ROBOT:DX,DY,DEG); merges undone counted.",
-    ),
-    config: Path = typer.Option(
-        None, "--config", "-c", help="TOML config the runs start from (profiles apply on it)."
-    ),
-    start_error: str = typer.Option(
-        "",
-        help="In the runs with the starts told, tell ROBOT's start DX metres, DY metres and "
-        "DEG degrees off where it stands (ROBOT:DX,DY,DEG): a start measured badly.",
-    ),
+    unknown_start: bool = EXPLORE_UNKNOWN_START_OPT,
+    wrong_anchor: str = EXPLORE_WRONG_ANCHOR_OPT,
+    config: Path = EXPLORE_CONFIG_OPT,
+    start_error: str = EXPLORE_START_ERROR_OPT,
 ) -> None:
     """Whole explorations (t99, success, IoU) against the idealised reference run for the
     same world, robots and profile, and the coordinator cycle under load.
@@ -79,20 +165,7 @@ def bench_explore(
     robot_offset(start_error, "start error")
     console = Console(stderr=True)
     with console.status("explorations") as status:
-
-        def on_run(k, n, spec, row) -> None:
-            what = (
-                f"{spec.world}, {spec.profile}, {spec.robots} robot(s), {spec.strategy}, "
-                f"seed {spec.seed}"
-            )
-            if row is None:
-                status.update(f"run {k + 1}/{n}: {what}")
-            else:
-                t99 = "never" if row["t99_s"] is None else f"{row['t99_s']:.1f} s"
-                console.log(
-                    f"{what}: t99 {t99} (reference {row['reference_t99_s']} s), coverage "
-                    f"{row['final_coverage']:.3f}, wall {row['wall_time_s']:.0f} s"
-                )
+        on_run = _explore_progress(console, status)
 
         res = eb.run(
             list(_names(worlds)),
@@ -116,55 +189,13 @@ def bench_explore(
     if as_json:
         typer.echo(json.dumps(res, indent=2, default=float))
         return
-    from rich.table import Table
 
     if unknown_start:
         _unknown_table(res["unknown_start"], seeds)
         return
 
-    t = Table(title=f"Exploration, t99 over {seeds} seed(s) (simulated s)")
-    for col in ("profile", "world", "robots", "t99 median", "reference", "ratio", "worst ratio"):
-        t.add_column(col, justify="right")
-    t.add_column("success", justify="right")
-
-    def num(v, fmt: str) -> str:
-        return "-" if v is None else format(v, fmt)
-
-    for prof, ws in res["profiles"].items():
-        for w, by_n in ws.items():
-            for n, d in by_n.items():
-                t.add_row(
-                    prof,
-                    w,
-                    n,
-                    num(d["t99_median_s"], ".0f"),
-                    num(d["reference_t99_s"], ".0f"),
-                    num(d["t99_ratio_vs_reference"], ".2f"),
-                    num(d["t99_ratio_vs_reference_worst"], ".2f"),
-                    f"{d['success_rate']:.2f}",
-                )
-    Console().print(t)
-    rows = [
-        ("success rate (99 %, no collision, no crash, IoU)", f"{res['success_rate']:.2f}"),
-        ("map IoU, worst run", num(res["map_iou_min"], ".3f")),
-        ("reachable area unexplored, worst run", num(res["unexplored_reachable_m2_max"], ".1f")),
-        ("wall collisions (all runs)", str(res["wall_collisions"])),
-        ("runs with a crashed process", str(res["crashed_runs"])),
-    ]
-    rows += [(f"t99 3 vs 1 robot, {w}", f"{v:.2f}") for w, v in res["t99_ratio_3_vs_1"].items()]
-    rows += [
-        (f"t99 hungarian vs nearest, {w}", f"{v:.2f}")
-        for w, v in res["t99_ratio_vs_nearest"].items()
-    ]
-    if "coordinator_load" in res:
-        ld = res["coordinator_load"]
-        rows.append(
-            (
-                f"coordinator cycle, {ld['robots']} robots, p50 / p95",
-                f"{ld['cycle_p50_ms']:.0f} / {ld['cycle_p95_ms']:.0f} ms",
-            )
-        )
-    _emit(res, False, "exploration summary", rows)
+    Console().print(_explore_table(res, seeds))
+    _emit(res, False, "exploration summary", _explore_rows(res))
 
 
 @bench_app.command("faults")

@@ -10,6 +10,86 @@ from polyswarm.cli import PROFILE_HELP, app, load_cfg
 from polyswarm.errors import DataFormatError, PolyswarmError
 
 
+def _run_log(log: Path, cfg, odometry: str, odom_noise: float, seed: int, report):
+    """PolySLAM over a CARMEN log, on its wheel odometry or on seeded synthetic noise
+    (``odom_noise`` times the default)."""
+    from polyswarm.runners import slam as runner
+    from polyswarm.slam.odometry import IncrementNoise
+
+    n = IncrementNoise()
+    noise = IncrementNoise(
+        *(
+            odom_noise * v
+            for v in (
+                n.scale_sigma,
+                n.lateral_sigma_per_m,
+                n.heading_sigma_per_rad,
+                n.heading_sigma_per_m,
+            )
+        )
+    )
+    try:
+        source = runner.OdometrySource(odometry)
+    except ValueError:
+        raise PolyswarmError(
+            f"--odometry must be one of {[str(o) for o in runner.OdometrySource]}"
+        ) from None
+    try:
+        return runner.run_log(log, cfg, noise, seed, report, source)
+    except DataFormatError as e:
+        if source != runner.OdometrySource.LOG or "ODOM" not in str(e):
+            raise
+        raise DataFormatError(f"{e}; run with --odometry noise") from None
+
+
+def _slam_table(name: str, m: dict):
+    """The metrics of a SLAM run: accuracy where there is ground truth, the map's
+    sharpness and the recording's facts for a bag, then cost."""
+    from rich.table import Table
+
+    t = Table(title=f"PolySLAM on {name}")
+    t.add_column("metric")
+    t.add_column("value", justify="right")
+    rows = [("distance travelled", f"{m['distance_travelled_m']:.1f} m")]
+    if "ate_rmse_m" in m:
+        rows += [
+            (
+                "ATE RMSE (odometry alone)",
+                f"{m['ate_rmse_m']:.3f} m ({m['odometry_ate_rmse_m']:.3f} m)",
+            ),
+            (
+                "RPE over 1 m / 10 m",
+                f"{m['rpe_1m_trans_mean_m']:.3f} / {m['rpe_10m_trans_mean_m']:.3f} m",
+            ),
+            ("max error", f"{m['max_trans_error_m']:.3f} m, {m['max_rot_error_deg']:.2f} deg"),
+            ("max error / distance", f"{100 * m['max_trans_error_ratio']:.3f} %"),
+        ]
+    if "occupied_cells_5cm" in m:  # a bag: no ground truth, the map's sharpness instead
+        rows += [
+            (
+                "occupied 5 cm cells (odometry alone)",
+                f"{m['occupied_cells_5cm']} ({m['odometry_occupied_cells_5cm']})",
+            ),
+            ("lidar mount from", m["mount"]),
+            ("mount check", m["mount_check"]["advice"] or "sharpest as given"),
+            (
+                "no return reported as",
+                f"{m['no_return']} ({100 * m['no_return_share']:.0f} % of beams)",
+            ),
+            ("messages skipped", str(sum(m["skipped"].values()))),
+        ]
+    rows += [
+        ("loops closed", str(m["loops_closed"])),
+        ("odometry distance scale learnt", f"{m['odometry_scale']:.4f}"),
+        ("keyframes, p95 time", f"{m['keyframes']}, {m['keyframe_p95_ms']:.1f} ms"),
+        ("faster than real time", f"{m['realtime_factor']:.1f} x"),
+        ("map vectors / polygons", f"{m['vectors']} / {m['polygons']}"),
+    ]
+    for r in rows:
+        t.add_row(*r)
+    return t
+
+
 @app.command("slam")
 def slam_cmd(
     log: Path | None = typer.Argument(
@@ -55,10 +135,8 @@ def slam_cmd(
     """Run PolySLAM; write map.polymap/.svg/.png, trajectory.tum, config.toml, metrics.json."""
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-    from rich.table import Table
 
     from polyswarm.runners import slam as runner
-    from polyswarm.slam.odometry import IncrementNoise
     from protocols.bags import is_bag
 
     if (log is None) == (world is None):
@@ -84,74 +162,11 @@ def slam_cmd(
         if log is not None and is_bag(log):
             run, cfg = runner.run_bag(log, cfg, report, scan_topic, odom_topic, ros_distro)
         elif log is not None:
-            n = IncrementNoise()
-            noise = IncrementNoise(
-                *(
-                    odom_noise * v
-                    for v in (
-                        n.scale_sigma,
-                        n.lateral_sigma_per_m,
-                        n.heading_sigma_per_rad,
-                        n.heading_sigma_per_m,
-                    )
-                )
-            )
-            try:
-                source = runner.OdometrySource(odometry)
-            except ValueError:
-                raise PolyswarmError(
-                    f"--odometry must be one of {[str(o) for o in runner.OdometrySource]}"
-                ) from None
-            try:
-                run = runner.run_log(log, cfg, noise, seed, report, source)
-            except DataFormatError as e:
-                if source != runner.OdometrySource.LOG or "ODOM" not in str(e):
-                    raise
-                raise DataFormatError(f"{e}; run with --odometry noise") from None
+            run = _run_log(log, cfg, odometry, odom_noise, seed, report)
         else:
             run = runner.run_world(world, cfg, seed, speed, report)
     m = runner.write_outputs(run, out, cfg)
-    t = Table(title=f"PolySLAM on {run.name}")
-    t.add_column("metric")
-    t.add_column("value", justify="right")
-    rows = [("distance travelled", f"{m['distance_travelled_m']:.1f} m")]
-    if "ate_rmse_m" in m:
-        rows += [
-            (
-                "ATE RMSE (odometry alone)",
-                f"{m['ate_rmse_m']:.3f} m ({m['odometry_ate_rmse_m']:.3f} m)",
-            ),
-            (
-                "RPE over 1 m / 10 m",
-                f"{m['rpe_1m_trans_mean_m']:.3f} / {m['rpe_10m_trans_mean_m']:.3f} m",
-            ),
-            ("max error", f"{m['max_trans_error_m']:.3f} m, {m['max_rot_error_deg']:.2f} deg"),
-            ("max error / distance", f"{100 * m['max_trans_error_ratio']:.3f} %"),
-        ]
-    if "occupied_cells_5cm" in m:  # a bag: no ground truth, the map's sharpness instead
-        rows += [
-            (
-                "occupied 5 cm cells (odometry alone)",
-                f"{m['occupied_cells_5cm']} ({m['odometry_occupied_cells_5cm']})",
-            ),
-            ("lidar mount from", m["mount"]),
-            ("mount check", m["mount_check"]["advice"] or "sharpest as given"),
-            (
-                "no return reported as",
-                f"{m['no_return']} ({100 * m['no_return_share']:.0f} % of beams)",
-            ),
-            ("messages skipped", str(sum(m["skipped"].values()))),
-        ]
-    rows += [
-        ("loops closed", str(m["loops_closed"])),
-        ("odometry distance scale learnt", f"{m['odometry_scale']:.4f}"),
-        ("keyframes, p95 time", f"{m['keyframes']}, {m['keyframe_p95_ms']:.1f} ms"),
-        ("faster than real time", f"{m['realtime_factor']:.1f} x"),
-        ("map vectors / polygons", f"{m['vectors']} / {m['polygons']}"),
-    ]
-    for r in rows:
-        t.add_row(*r)
-    Console().print(t)
+    Console().print(_slam_table(run.name, m))
     typer.echo(f"wrote {out}")
 
 
