@@ -78,6 +78,10 @@ FRAME_WAIT_S = 120.0
 # every robot home, the mission waits at most this long (s) for maps it has not received
 # yet (a robot back from out of range hands over what it mapped alone: 1-2 s)
 HANDOVER_WAIT_S = 20.0
+# ... and at most this long (s, from when it left) for a robot that left out of range
+# before it was home: cut off, it explores its own frontiers, then drives home, back
+# into range (one cut off for 120 s in bench fleet --part cuts)
+OUT_OF_RANGE_WAIT_S = 180.0
 
 
 @dataclass
@@ -108,6 +112,7 @@ class RobotInfo:
     # its poses sent before are that far off its map now (sightings forget them)
     corrected_s: float = -math.inf
     home_failed: bool = False  # could not drive back to its start (the mission still ends)
+    left_t: float | None = None  # when it left (its liveliness gone) before it was home
     left_over_since: float | None = None  # the assignment has left it over (or it follows)
     # with a replay pool (``agents.replay``): the count of whole maps given to its worker
     # (results of updates sent before the last are dropped), its updates on the way, and
@@ -201,6 +206,7 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
         self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
         self.frames_pending: tuple[str, ...] = ()  # robots exploring in frames of their own
         self._handover_since: float | None = None  # every robot home, waiting for a map
+        self._awaited: list[str] = []  # robots out of range the mission end waits for
         # robots drawn to a rendezvous (``agents.anchoring``): robot -> (x m, y m, heading
         # rad) in this coordinator's frame. A robot exploring alone is drawn to where its
         # candidate frame puts the nearest robot of the swarm (and the way that one faces)
@@ -248,6 +254,8 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
         if info.alive != alive:
             log.info("robot %s %s", rid, "joined" if alive else "left")
             info.alive = alive
+            home = info.status is not None and info.status.state == RobotState.HOME
+            info.left_t = self.now if not alive and not home and info.pose is not None else None
             if not alive:
                 info.assignment = None
             self._wake = True
@@ -462,14 +470,26 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
     def _finish(self, live) -> None:
         """Every robot home: the mission is done once every map a robot announced is
         here (one back from out of range first hands over what it mapped alone), or
-        after ``HANDOVER_WAIT_S`` of waiting for it."""
+        after ``HANDOVER_WAIT_S`` of waiting for it; a robot that left before it was home
+        holds the end up to ``OUT_OF_RANGE_WAIT_S`` after it left."""
         behind = sorted(r.id for r in live if r.behind_since is not None)
+        away = sorted(
+            r.id
+            for r in self.robots.values()
+            if not r.alive and r.left_t is not None and self.now - r.left_t < OUT_OF_RANGE_WAIT_S
+        )
         if behind and self._handover_since is None:
             self._handover_since = self.now
         if behind and self.now - self._handover_since < HANDOVER_WAIT_S:
             return
-        if behind:
-            log.warning("mission done without the last updates of %s", ", ".join(behind))
+        if away:
+            if away != self._awaited:
+                log.info("mission end waits for %s, out of range", ", ".join(away))
+                self._awaited = away
+            return
+        gone = sorted(r.id for r in self.robots.values() if not r.alive and r.left_t is not None)
+        if behind or gone:
+            log.warning("mission done without the last updates of %s", ", ".join(behind + gone))
         self.state = MissionState.DONE
         log.info("mission done")
 

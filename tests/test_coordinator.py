@@ -604,3 +604,47 @@ def test_a_map_that_never_arrives_holds_the_end_of_the_mission_only_so_long():
     c.now += HANDOVER_WAIT_S
     c.cycle()
     assert c.state == MissionState.DONE
+
+
+def test_a_robot_out_of_range_before_it_was_home_holds_the_end_of_the_mission():
+    """r2 left (cut off while exploring): the mission waits for it; back in range with
+    what it mapped alone, it hands it over and the mission ends."""
+    from agents.coordinator import OUT_OF_RANGE_WAIT_S
+
+    c = home_with_nothing_left()
+    c.on_alive("r2", True)
+    c.on_pose("r2", c.now, Pose(3.0, 1.0, 0.0, 0))
+    c.on_alive("r2", False)  # out of range, not home
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.RETURNING
+    c.now += OUT_OF_RANGE_WAIT_S / 2
+    c.cycle()
+    assert c.state == MissionState.RETURNING
+    c.on_alive("r2", True)  # back in range: its map is fetched, then handed over
+    c.on_pose("r2", c.now, Pose(3.0, 1.0, 0.0, 4))
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.RETURNING  # r2's map not here yet
+    later = corridor_map(open_end=False)
+    c.on_robot_map("r2", type(later)(later.cell_size, later.cells, 4))
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.DONE
+
+
+def test_a_robot_that_never_comes_back_holds_the_end_only_so_long(caplog):
+    from agents.coordinator import OUT_OF_RANGE_WAIT_S
+
+    c = home_with_nothing_left()
+    c.on_alive("r2", True)
+    c.on_pose("r2", c.now, Pose(3.0, 1.0, 0.0, 0))
+    c.on_alive("r2", False)
+    left = c.now
+    c.now += 1.0
+    c.cycle()
+    assert c.state == MissionState.RETURNING
+    c.now = left + OUT_OF_RANGE_WAIT_S
+    c.cycle()
+    assert c.state == MissionState.DONE
+    assert "without the last updates of r2" in caplog.text
