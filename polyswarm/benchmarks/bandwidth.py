@@ -220,10 +220,40 @@ def _scan_bounds(kf: Keyframe, mount, free_range_m: float) -> tuple[float, float
     return xs.min(), ys.min(), xs.max(), ys.max()
 
 
+def _keyframe_row(kf: Keyframe, g: CountingGrid, mount) -> dict:
+    """The bytes of every scheme for one keyframe's update (the grid integrates its scan)."""
+    from protocols.ros import encode_grid_update, encode_occupancy_grid
+
+    g.integrate(kf.scan, kf.pose, mount)
+    box = g.changes()
+    full = g.trinary()
+    full_raw = encode_occupancy_grid(full, g.res, g.origin, kf.t_s)
+    row = {
+        "t_s": kf.t_s,
+        "robot": kf.robot,
+        "polymap_delta": kf.delta_bytes,
+        "polymap_delta_zlib": kf.delta_zlib_bytes,
+        "polymap_cells": kf.cells_bytes,
+        "grid_full": len(full_raw),
+        "grid_full_zlib": len(zlib.compress(full_raw)),
+        "grid_full_png": png_bytes(full),
+        "grid_update": 0,
+        "grid_update_zlib": 0,
+        "grid_update_png": 0,
+        "keyframe_scans": len(encode_keyframe_scan(kf.scan, kf.pose)),
+        "known_m2": float((full != -1).sum()) * g.res**2,
+    }
+    if box is not None:
+        upd = encode_grid_update(box.data, box.row0, box.col0, kf.t_s)
+        row["grid_update"] = len(upd)
+        row["grid_update_zlib"] = len(zlib.compress(upd))
+        row["grid_update_png"] = png_bytes(box.data)
+    return row
+
+
 def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) -> dict:
     """Bytes per scheme per keyframe; cumulative totals and final map sizes."""
     from protocols.mapcodec import encode_map
-    from protocols.ros import encode_grid_update, encode_occupancy_grid
 
     if not rec.keyframes:
         raise ValueError(f"{rec.name}: no keyframes")
@@ -240,32 +270,7 @@ def measure(rec: Recording, progress: Callable[[int, int], None] | None = None) 
     }
     rows = []
     for n, kf in enumerate(rec.keyframes):
-        g = grids[kf.robot]
-        g.integrate(kf.scan, kf.pose, rec.mount)
-        box = g.changes()
-        full = g.trinary()
-        full_raw = encode_occupancy_grid(full, g.res, g.origin, kf.t_s)
-        row = {
-            "t_s": kf.t_s,
-            "robot": kf.robot,
-            "polymap_delta": kf.delta_bytes,
-            "polymap_delta_zlib": kf.delta_zlib_bytes,
-            "polymap_cells": kf.cells_bytes,
-            "grid_full": len(full_raw),
-            "grid_full_zlib": len(zlib.compress(full_raw)),
-            "grid_full_png": png_bytes(full),
-            "grid_update": 0,
-            "grid_update_zlib": 0,
-            "grid_update_png": 0,
-            "keyframe_scans": len(encode_keyframe_scan(kf.scan, kf.pose)),
-            "known_m2": float((full != -1).sum()) * g.res**2,
-        }
-        if box is not None:
-            upd = encode_grid_update(box.data, box.row0, box.col0, kf.t_s)
-            row["grid_update"] = len(upd)
-            row["grid_update_zlib"] = len(zlib.compress(upd))
-            row["grid_update_png"] = png_bytes(box.data)
-        rows.append(row)
+        rows.append(_keyframe_row(kf, grids[kf.robot], rec.mount))
         if progress:
             progress(n + 1, len(rec.keyframes))
     cumulative = {s: int(sum(r[s] for r in rows)) for s in SCHEMES}

@@ -36,6 +36,44 @@ def _length(grid, cells) -> float:
     return float(np.hypot(*np.diff(pts, axis=0).T).sum())
 
 
+def _compare_summary(r: np.ndarray, graph, build_s: float, trav, native, counts) -> dict:
+    """``compare``'s figures from its rows (``r``: our length, the grid A*'s length, our
+    and its seconds, clearance, the compiled planner's length and seconds, the same at
+    the map's own resolution) and its counts (failures, native failures, violations)."""
+    failures, native_failures, violations = counts
+    ok_nat = np.isfinite(r[:, 7])
+    return {
+        "nodes": graph.node_count,
+        "pieces": graph.piece_count,
+        "edges": graph.edge_count,
+        "graph_build_s": build_s,
+        "inflated_grid_free_cells": int(trav.sum()),
+        "node_ratio": float(trav.sum() / max(graph.node_count, 1)),
+        "pairs": len(r),
+        "planner_failures": failures,
+        "path_length_ratio_median": float(np.median(r[:, 0] / r[:, 1])),
+        "path_length_ratio_p90": float(np.percentile(r[:, 0] / r[:, 1], 90)),
+        "planning_ms_median": float(np.median(r[:, 2]) * 1e3),
+        "grid_astar_ms_median": float(np.median(r[:, 3]) * 1e3),
+        "planning_speedup_median": float(np.median(r[:, 3] / r[:, 2])),
+        # against the compiled planner, at 5 cm and at the map's own resolution
+        "grid_mcp_ms_median": float(np.median(r[:, 6]) * 1e3),
+        "speedup_vs_compiled_median": float(np.median(r[:, 6] / r[:, 2])),
+        "path_length_ratio_vs_compiled_median": float(np.nanmedian(r[:, 0] / r[:, 5])),
+        "native_resolution_m": None if native is None else native.resolution,
+        "native_mcp_ms_median": float(np.median(r[ok_nat, 8]) * 1e3) if ok_nat.any() else None,
+        "speedup_vs_native_compiled_median": (
+            float(np.median(r[ok_nat, 8] / r[ok_nat, 2])) if ok_nat.any() else None
+        ),
+        "path_length_ratio_vs_native_median": (
+            float(np.median(r[ok_nat, 0] / r[ok_nat, 7])) if ok_nat.any() else None
+        ),
+        "native_no_path": int(native_failures),
+        "min_clearance_to_walls_m": float(r[:, 4].min()),
+        "clearance_violations": int(violations),
+    }
+
+
 def compare(
     pmap, grid, walls, radius: float, robot_radius: float, pairs: int, seed: int, native=None
 ) -> dict:
@@ -87,38 +125,8 @@ def compare(
         clear = path_clearance(path.points, ws, we)
         violations += clear < robot_radius - 1e-9
         rows.append((path.length_m, glen, ours_s, grid_s, clear, mlen, mcp_s, nat_len, nat_s))
-    r = np.array(rows)
-    ok_nat = np.isfinite(r[:, 7])
-    return {
-        "nodes": graph.node_count,
-        "pieces": graph.piece_count,
-        "edges": graph.edge_count,
-        "graph_build_s": build_s,
-        "inflated_grid_free_cells": int(trav.sum()),
-        "node_ratio": float(trav.sum() / max(graph.node_count, 1)),
-        "pairs": len(r),
-        "planner_failures": failures,
-        "path_length_ratio_median": float(np.median(r[:, 0] / r[:, 1])),
-        "path_length_ratio_p90": float(np.percentile(r[:, 0] / r[:, 1], 90)),
-        "planning_ms_median": float(np.median(r[:, 2]) * 1e3),
-        "grid_astar_ms_median": float(np.median(r[:, 3]) * 1e3),
-        "planning_speedup_median": float(np.median(r[:, 3] / r[:, 2])),
-        # against the compiled planner, at 5 cm and at the map's own resolution
-        "grid_mcp_ms_median": float(np.median(r[:, 6]) * 1e3),
-        "speedup_vs_compiled_median": float(np.median(r[:, 6] / r[:, 2])),
-        "path_length_ratio_vs_compiled_median": float(np.nanmedian(r[:, 0] / r[:, 5])),
-        "native_resolution_m": None if native is None else native.resolution,
-        "native_mcp_ms_median": float(np.median(r[ok_nat, 8]) * 1e3) if ok_nat.any() else None,
-        "speedup_vs_native_compiled_median": (
-            float(np.median(r[ok_nat, 8] / r[ok_nat, 2])) if ok_nat.any() else None
-        ),
-        "path_length_ratio_vs_native_median": (
-            float(np.median(r[ok_nat, 0] / r[ok_nat, 7])) if ok_nat.any() else None
-        ),
-        "native_no_path": int(native_failures),
-        "min_clearance_to_walls_m": float(r[:, 4].min()),
-        "clearance_violations": int(violations),
-    }
+    counts = (failures, native_failures, violations)
+    return _compare_summary(np.array(rows), graph, build_s, trav, native, counts)
 
 
 def update_times(world: str = "office", seed: int = 0, radius: float = 0.25) -> np.ndarray:
