@@ -146,10 +146,6 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
         self._in_merge: tuple[set, MergeJob] | None = None  # the job on its way, its robots
         self._fresh = False  # a merge came in since the last plan
         self._facts: tuple | None = None  # (merged map version, its frontier facts)
-        self.merge_lag_ms: list[float] = []  # wall time from sending a merge job to applying it
-        self.merger_cpu_ms: list[float] = []  # the merge process's processor time per job
-        self.worker_replay_cpu_ms: list[float] = []  # the pool's processor time per update
-        self.replay_lag_ms: list[float] = []  # wall time from sending an update to taking it in
         self.strategy = Strategy(cfg.explore.strategy)
         self.robots = {rid: RobotInfo(rid, np.array(p, dtype=float)) for rid, p in robots.items()}
         self.merged = GridPolyMap(cfg.map.cell_size_m)
@@ -187,23 +183,8 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
         self._timing = False  # inside a ``timed`` block
         self._pending: dict[str, set] = {}  # robot -> its cells changed since the last merge
         self._rebuild: set = set()  # cells a robot's correction changed: merged afresh
-        self.corrections = 0  # robot corrections replayed on their map copies
         self._last_flush = -math.inf
-        self.cycle_ms: list[float] = []
-        self.cycle_cpu_ms: list[float] = []  # this thread's processor time of each cycle
         self.now = 0.0
-        self.bytes_sent = 0
-        self.replayed_merges = 0  # robot merges replayed on their map copies
-        self.replay_cpu_ms: list[float] = []  # this thread's processor time of each replay
-        # wall milliseconds of all the work in the coordinator's thread, by stage: replays
-        # of robots' merges, cell deltas, full maps, blocking map fetches, merging into the
-        # merged map, the cycle's planning, journaling and publishing. All of it counts
-        # into the next cycle's time (``cycle_ms``): it delays the cycle as much
-        self.stage_ms: dict[str, float] = {}
-        self.applied_deltas = 0  # robot cell deltas applied to them
-        self.map_fetches = 0  # robot maps fetched whole (a gap, or a merge that differed)
-        self.fetch_bytes = 0  # ... and the bytes they took
-        self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
         self.frames_pending: tuple[str, ...] = ()  # robots exploring in frames of their own
         self._handover_since: float | None = None  # every robot home, waiting for a map
         self._awaited: list[str] = []  # robots out of range the mission end waits for
@@ -219,6 +200,29 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
         self.own_maps = False
         self.meetings = Meetings(cfg)  # their tours once no frontier is left
         self.out_of_frontiers = False  # the last cycle found no frontier a robot can reach
+        self._init_counters()
+
+    def _init_counters(self) -> None:
+        """What the coordinator counts and times (its metrics and benchmarks read them)."""
+        self.merge_lag_ms: list[float] = []  # wall time from sending a merge job to applying it
+        self.merger_cpu_ms: list[float] = []  # the merge process's processor time per job
+        self.worker_replay_cpu_ms: list[float] = []  # the pool's processor time per update
+        self.replay_lag_ms: list[float] = []  # wall time from sending an update to taking it in
+        self.corrections = 0  # robot corrections replayed on their map copies
+        self.cycle_ms: list[float] = []
+        self.cycle_cpu_ms: list[float] = []  # this thread's processor time of each cycle
+        self.bytes_sent = 0
+        self.replayed_merges = 0  # robot merges replayed on their map copies
+        self.replay_cpu_ms: list[float] = []  # this thread's processor time of each replay
+        # wall milliseconds of all the work in the coordinator's thread, by stage: replays
+        # of robots' merges, cell deltas, full maps, blocking map fetches, merging into the
+        # merged map, the cycle's planning, journaling and publishing. All of it counts
+        # into the next cycle's time (``cycle_ms``): it delays the cycle as much
+        self.stage_ms: dict[str, float] = {}
+        self.applied_deltas = 0  # robot cell deltas applied to them
+        self.map_fetches = 0  # robot maps fetched whole (a gap, or a merge that differed)
+        self.fetch_bytes = 0  # ... and the bytes they took
+        self.gaps = 0  # robot map updates that did not apply (lost, late, replayed otherwise)
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -384,55 +388,12 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
                 self.graph, self.merged, [r.pose[:2] for r in live], self._index
             )
             # 2. frontier targets with goal points the robots can reach, and their costs
-            targets = self._update_targets(reach)
-            ids = list(targets)
-            costs = reach.costs([t.goal for t in targets.values()])
-            # a target excluded for every robot (failed recently) waits; it is not gone
-            reachable = np.isfinite(costs).any(axis=0)
-            self.out_of_frontiers = not reachable.any()
-            for k, r in enumerate(live):  # targets this robot failed recently
-                for j, tid in enumerate(ids):
-                    if r.excluded.get(tid, -math.inf) > self.now:
-                        costs[k, j] = math.inf
-            if self.own_maps and len(live) > 1 and ids:
-                # a waiting team's robots plan on their own maps (``agents.anchoring``):
-                # each takes the team's frontiers whose goals lie in its own map
-                goals = np.array([targets[t].goal for t in ids]).reshape(-1, 2)
-                for k, r in enumerate(live):
-                    if r.map is not None:
-                        costs[k, ~r.map.is_free_many(goals)] = math.inf
+            targets, ids, costs, reachable = self._targets_and_costs(live, reach)
             if self.state == MissionState.RETURNING and reachable.any():
                 log.info("new frontiers while returning: exploring again")
                 self.state = MissionState.EXPLORING
             if self.state == MissionState.EXPLORING:
-                # nothing any robot may take now (none left, or those left failed lately),
-                # or a robot seen at its candidate frame (``tour_first``): a robot drawn to
-                # a rendezvous tours standpoints in sight of it
-                idle = not np.isfinite(costs).any() or bool(self.tour_first & set(self.rendezvous))
-                if idle and self.rendezvous and self.meetings.orders(self, live, reach):
-                    self._no_target_since, self._no_target_cycles = None, 0
-                elif not reachable.any():
-                    if self._no_target_since is None:
-                        self._no_target_since = self.now
-                    # every robot's map merged up to what it announced: nothing in flight;
-                    # and some robot on the graph (not one at the tip of its first scan)
-                    in_flight = any(r.behind_since is not None for r in live)
-                    lost = all(s is None for s in reach.sources)
-                    self._no_target_cycles += 0 if in_flight or lost else 1
-                    if (
-                        self.now - self._no_target_since >= self.cfg.explore.end_confirm_s
-                        and self._no_target_cycles >= END_CONFIRM_CYCLES
-                        and not self._waiting_for_frames()
-                        and not self._retry_blacklisted()
-                    ):
-                        self._end_exploration(live)
-                else:
-                    self._no_target_since = None
-                    self._no_target_cycles = 0
-                    # 3. assignment by strategy, keeping current targets unless beaten
-                    self._assign(live, ids, targets, costs)
-                    # 4. no progress towards a target for too long counts as a failure
-                    self._watch_progress(live, ids, costs)
+                self._explore(live, reach, targets, ids, costs, reachable)
             if self.state == MissionState.RETURNING and all(
                 # home, or unable to get there (the exploration itself is complete)
                 r.home_failed or (r.status is not None and r.status.state == RobotState.HOME)
@@ -450,7 +411,67 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
         self._pending_ms = self._pending_cpu_ms = 0.0
         self.cycle_ms.append(ms)
         self.cycle_cpu_ms.append(cpu_ms)
-        out.status = CoordinatorStatus(
+        out.status = self._status(ms, cpu_ms)
+        return out
+
+    def _targets_and_costs(self, live, reach):
+        """The frontier targets, their ids, each live robot's cost to each (inf where it
+        failed it lately, or, in a waiting team, where the goal is outside its own map)
+        and which targets some robot may reach."""
+        targets = self._update_targets(reach)
+        ids = list(targets)
+        costs = reach.costs([t.goal for t in targets.values()])
+        # a target excluded for every robot (failed recently) waits; it is not gone
+        reachable = np.isfinite(costs).any(axis=0)
+        self.out_of_frontiers = not reachable.any()
+        for k, r in enumerate(live):  # targets this robot failed recently
+            for j, tid in enumerate(ids):
+                if r.excluded.get(tid, -math.inf) > self.now:
+                    costs[k, j] = math.inf
+        if self.own_maps and len(live) > 1 and ids:
+            # a waiting team's robots plan on their own maps (``agents.anchoring``):
+            # each takes the team's frontiers whose goals lie in its own map
+            goals = np.array([targets[t].goal for t in ids]).reshape(-1, 2)
+            for k, r in enumerate(live):
+                if r.map is not None:
+                    costs[k, ~r.map.is_free_many(goals)] = math.inf
+        return targets, ids, costs, reachable
+
+    def _explore(self, live, reach, targets, ids, costs, reachable) -> None:
+        """One cycle of the exploration: rendezvous orders, the end of the exploration
+        when no frontier is left (confirmed), or assignment and progress watch."""
+        # nothing any robot may take now (none left, or those left failed lately),
+        # or a robot seen at its candidate frame (``tour_first``): a robot drawn to
+        # a rendezvous tours standpoints in sight of it
+        idle = not np.isfinite(costs).any() or bool(self.tour_first & set(self.rendezvous))
+        if idle and self.rendezvous and self.meetings.orders(self, live, reach):
+            self._no_target_since, self._no_target_cycles = None, 0
+        elif not reachable.any():
+            if self._no_target_since is None:
+                self._no_target_since = self.now
+            # every robot's map merged up to what it announced: nothing in flight;
+            # and some robot on the graph (not one at the tip of its first scan)
+            in_flight = any(r.behind_since is not None for r in live)
+            lost = all(s is None for s in reach.sources)
+            self._no_target_cycles += 0 if in_flight or lost else 1
+            if (
+                self.now - self._no_target_since >= self.cfg.explore.end_confirm_s
+                and self._no_target_cycles >= END_CONFIRM_CYCLES
+                and not self._waiting_for_frames()
+                and not self._retry_blacklisted()
+            ):
+                self._end_exploration(live)
+        else:
+            self._no_target_since = None
+            self._no_target_cycles = 0
+            # 3. assignment by strategy, keeping current targets unless beaten
+            self._assign(live, ids, targets, costs)
+            # 4. no progress towards a target for too long counts as a failure
+            self._watch_progress(live, ids, costs)
+
+    def _status(self, ms: float, cpu_ms: float) -> CoordinatorStatus:
+        """The status this cycle publishes (its cost ``ms``, ``cpu_ms``)."""
+        return CoordinatorStatus(
             self.state,
             tuple(sorted(r.id for r in self.robots.values() if r.alive)),
             len(self.targets),
@@ -465,7 +486,6 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
             self.map_fetches,
             self.fetch_bytes,
         )
-        return out
 
     def _finish(self, live) -> None:
         """Every robot home: the mission is done once every map a robot announced is
