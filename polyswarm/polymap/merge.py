@@ -215,6 +215,28 @@ class Merging:
             pieces = pieces[live]
         if not idxs:
             return MergeResult(self, frozenset())
+        old, regions = self._grown_regions(idxs, pieces, opt)
+        need, starts, ends = self._to_type_again(idxs, old, regions, src_starts, src_ends, opt)
+        keep = [k for k, i in enumerate(idxs) if i in need]
+        idxs, regions = [idxs[k] for k in keep], regions[keep]
+        regions = _node_borders(idxs, regions, self.cells, self.cell_size, need)
+        neighbour_region = {i: r for i, r in zip(idxs, regions, strict=True)}
+        new_cells = _typed_cells(
+            idxs,
+            regions,
+            self.cell_size,
+            starts,
+            ends,
+            neighbour_region,
+            self.cells,
+            opt.obstacle_snap_m,
+            (opt.obstacle_snap_behind_m, opt.obstacle_snap_front_m),
+        )
+        return self._commit(idxs, new_cells, opt)
+
+    def _grown_regions(self, idxs, pieces, opt: MergeOptions):
+        """Each cell's old region and its region after the union with its piece (slivers
+        and, along walls, growth thinner than ``min_growth_m`` left out)."""
         empty = shapely.Polygon()
         old = np.array(
             [self.cells[i].region if i in self.cells else empty for i in idxs], dtype=object
@@ -249,6 +271,12 @@ class Merging:
             raise MapError(
                 f"merge would shrink explored space in cell {idxs[int(np.argmax(lost))]}"
             )
+        return old, regions
+
+    def _to_type_again(self, idxs, old, regions, src_starts, src_ends, opt: MergeOptions):
+        """The cells whose vectors are typed again (regions that moved, neighbours across a
+        changed border, cells where an obstacle vector retypes a frontier), and the
+        obstacle sources (the new polygon's obstacle vectors and the cells' old ones)."""
         # a border vector must end where explored space across the border starts or ends,
         # so that only its part facing unexplored space stays a frontier
         # (only around regions that moved: the others were noded when they last changed)
@@ -279,21 +307,10 @@ class Merging:
                 (opt.obstacle_snap_behind_m, opt.obstacle_snap_front_m),
             )
             need.update(same[k].index for k in np.unique(owner[retyped]))
-        keep = [k for k, i in enumerate(idxs) if i in need]
-        idxs, regions = [idxs[k] for k in keep], regions[keep]
-        regions = _node_borders(idxs, regions, self.cells, self.cell_size, need)
-        neighbour_region = {i: r for i, r in zip(idxs, regions, strict=True)}
-        new_cells = _typed_cells(
-            idxs,
-            regions,
-            self.cell_size,
-            starts,
-            ends,
-            neighbour_region,
-            self.cells,
-            opt.obstacle_snap_m,
-            (opt.obstacle_snap_behind_m, opt.obstacle_snap_front_m),
-        )
+        return need, starts, ends
+
+    def _commit(self, idxs, new_cells, opt: MergeOptions) -> MergeResult:
+        """The map with the changed cells (notches filled), one version on."""
         version = self.version + 1
         out = dict(self.cells)
         changed = set()
