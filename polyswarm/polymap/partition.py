@@ -223,65 +223,83 @@ def _partition_polygon(rings, offset: int) -> list[Piece]:
     _, firsts, inverse = np.unique(key, return_index=True, return_inverse=True)
     canon = firsts[inverse.ravel()]
     tri = canon[tri]
-
     # type of each boundary vector, keyed by its (start, end) vertex indices
     boundary: dict[tuple[int, int], int] = dict(
         zip(zip(canon.tolist(), canon[succ].tolist(), strict=True), types.tolist(), strict=True)
     )
+    cycles = _Cycles(tri, q)
+    cycles.join_convex(boundary)
+    roots = sorted({cycles.find(t) for t in range(len(tri))})
+    local = {r: offset + k for k, r in enumerate(roots)}
+    along = {a: b for a, b in boundary}  # boundary vertex -> the next one on its ring
+    return [cycles.piece(r, xy, boundary, along, local) for r in roots]
 
-    # each piece is a cycle stored as next/prev maps over vertex indices
-    nxt: list[dict[int, int]] = []
-    prv: list[dict[int, int]] = []
-    owner: dict[tuple[int, int], int] = {}  # directed edge -> piece
-    for t, (i, j, k) in enumerate(tri.tolist()):
-        nxt.append({i: j, j: k, k: i})
-        prv.append({j: i, k: j, i: k})
-        for e in ((i, j), (j, k), (k, i)):
-            owner[e] = t
-    parent = list(range(len(tri)))
 
-    def find(p: int) -> int:
+class _Cycles:
+    """Triangles as cycles (next/prev maps over vertex indices), joined across
+    diagonals while the union stays convex (Hertel-Mehlhorn)."""
+
+    def __init__(self, tri: np.ndarray, q: np.ndarray) -> None:
+        self.nxt: list[dict[int, int]] = []
+        self.prv: list[dict[int, int]] = []
+        self.owner: dict[tuple[int, int], int] = {}  # directed edge -> piece
+        for t, (i, j, k) in enumerate(tri.tolist()):
+            self.nxt.append({i: j, j: k, k: i})
+            self.prv.append({j: i, k: j, i: k})
+            for e in ((i, j), (j, k), (k, i)):
+                self.owner[e] = t
+        self.parent = list(range(len(tri)))
+        self.qx, self.qy = q[:, 0].tolist(), q[:, 1].tolist()  # exact Python integers
+
+    def find(self, p: int) -> int:
+        parent = self.parent
         while parent[p] != p:
             parent[p] = parent[parent[p]]
             p = parent[p]
         return p
 
-    qx, qy = q[:, 0].tolist(), q[:, 1].tolist()  # exact Python integers
-
-    def left_turn(a: int, b: int, c: int) -> bool:
+    def _left_turn(self, a: int, b: int, c: int) -> bool:
+        qx, qy = self.qx, self.qy
         return (qx[b] - qx[a]) * (qy[c] - qy[b]) - (qy[b] - qy[a]) * (qx[c] - qx[b]) >= 0
 
-    diagonals = [(u, v) for (u, v) in owner if u < v and (v, u) in owner and (u, v) not in boundary]
-    diagonals.sort(key=lambda e: -((qx[e[1]] - qx[e[0]]) ** 2 + (qy[e[1]] - qy[e[0]]) ** 2))
-    for u, v in diagonals:
-        P, Q = find(owner[(u, v)]), find(owner[(v, u)])
-        if P == Q:
-            continue
-        # merged cycle: P without u->v, Q without v->u; check convexity at u and v
-        if not (left_turn(prv[P][u], u, nxt[Q][u]) and left_turn(prv[Q][v], v, nxt[P][v])):
-            continue
-        merged_n, merged_p = dict(nxt[P]), dict(prv[P])
-        for a, b in nxt[Q].items():
-            if a == v:
+    def join_convex(self, boundary: dict) -> None:
+        """Drop diagonals, longest first, where the two cycles they split make a convex one."""
+        qx, qy, owner, nxt, prv = self.qx, self.qy, self.owner, self.nxt, self.prv
+        diagonals = [
+            (u, v) for (u, v) in owner if u < v and (v, u) in owner and (u, v) not in boundary
+        ]
+        diagonals.sort(key=lambda e: -((qx[e[1]] - qx[e[0]]) ** 2 + (qy[e[1]] - qy[e[0]]) ** 2))
+        for u, v in diagonals:
+            P, Q = self.find(owner[(u, v)]), self.find(owner[(v, u)])
+            if P == Q:
                 continue
-            merged_n[a] = b
-            merged_p[b] = a
-        merged_n[u] = nxt[Q][u]
-        merged_p[nxt[Q][u]] = u
-        merged_n[v] = nxt[P][v]
-        merged_p[nxt[P][v]] = v
-        nxt[P], prv[P] = merged_n, merged_p
-        nxt[Q], prv[Q] = {}, {}
-        parent[Q] = P
+            # merged cycle: P without u->v, Q without v->u; check convexity at u and v
+            if not (
+                self._left_turn(prv[P][u], u, nxt[Q][u])
+                and self._left_turn(prv[Q][v], v, nxt[P][v])
+            ):
+                continue
+            merged_n, merged_p = dict(nxt[P]), dict(prv[P])
+            for a, b in nxt[Q].items():
+                if a == v:
+                    continue
+                merged_n[a] = b
+                merged_p[b] = a
+            merged_n[u] = nxt[Q][u]
+            merged_p[nxt[Q][u]] = u
+            merged_n[v] = nxt[P][v]
+            merged_p[nxt[P][v]] = v
+            nxt[P], prv[P] = merged_n, merged_p
+            nxt[Q], prv[Q] = {}, {}
+            self.parent[Q] = P
 
-    roots = sorted({find(t) for t in range(len(tri))})
-    local = {r: offset + k for k, r in enumerate(roots)}
-    along = {a: b for a, b in boundary}  # boundary vertex -> the next one on its ring
-    pieces = []
-    for r in roots:
-        start = min(nxt[r])
+    def piece(self, r: int, xy, boundary: dict, along: dict, local: dict) -> Piece:
+        """The piece of cycle ``r``: boundary vectors keep their types, splits become
+        sectors linked to the piece across (``local``: cycle -> piece number)."""
+        nxt, owner = self.nxt[r], self.owner
+        start = min(nxt)
         cyc = [start]
-        while (w := nxt[r][cyc[-1]]) != start:
+        while (w := nxt[cyc[-1]]) != start:
             cyc.append(w)
         verts, ety, links = [], [], []
         for a, b in zip(cyc, cyc[1:] + cyc[:1], strict=True):
@@ -292,7 +310,7 @@ def _partition_polygon(rings, offset: int) -> list[Piece]:
             elif (b, a) in owner:  # an internal split: the piece across owns the reverse
                 verts.append(a)
                 ety.append(int(VectorType.SECTOR))
-                links.append(local[find(owner[(b, a)])])
+                links.append(local[self.find(owner[(b, a)])])
             elif (chain := _boundary_chain(along, a, b)) is not None:
                 # collinear boundary vertices whose zero-area triangles the triangulation
                 # left out: the vectors between them keep their own types
@@ -305,14 +323,11 @@ def _partition_polygon(rings, offset: int) -> list[Piece]:
                 verts.append(a)
                 ety.append(int(VectorType.FRONTIER))
                 links.append(NO_LINK)
-        pieces.append(
-            Piece(
-                xy=xy[verts].copy(),
-                types=np.array(ety, dtype=np.uint8),
-                links=np.array(links, dtype=np.int64),
-            )
+        return Piece(
+            xy=xy[verts].copy(),
+            types=np.array(ety, dtype=np.uint8),
+            links=np.array(links, dtype=np.int64),
         )
-    return pieces
 
 
 MAX_CHAIN = 64  # collinear boundary vertices looked for along one piece edge
