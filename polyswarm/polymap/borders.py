@@ -76,34 +76,11 @@ def _across_changed_borders(
     }
 
 
-def _node_borders(
-    idxs: list[CellIndex],
-    regions: np.ndarray,
-    old_cells: Mapping[CellIndex, Cell],
-    size: float,
-    need: set[CellIndex],
-) -> np.ndarray:
-    """Each region with a vertex wherever a neighbour's boundary meets their shared border.
+def _extra_nodes(xy, cell, t_of: dict, size: float, n_targets: int) -> dict:
+    """Per target (its number in ``t_of``) and side (0 bottom, 1 right, 2 top, 3 left), the
+    coordinates along the side where a neighbour's vertex nodes it and the target has none.
 
-    A cell's border vector spans between its own vertices; explored space across it may
-    cover only part of it (a notch of the neighbour). Intersecting the region with its
-    cell square carrying those extra vertices nodes the region's border edges there
-    (the overlay keeps every vertex of both inputs on shared edges; all are on the grid,
-    so the geometry does not change). Only the cells in ``need`` are noded."""
-    new = dict(zip(idxs, regions, strict=True))
-    target = {ix: k for k, ix in enumerate(idxs) if ix in need}
-    if not target:
-        return regions
-    # every vertex of the targets' regions and of their neighbours', with its cell
-    keys = list(dict.fromkeys([*target, *(n for ix in target for n in _neighbours(ix))]))
-    geoms = [_region_at(ix, new, old_cells) for ix in keys]
-    xy, which = shapely.get_coordinates(
-        np.array([_EMPTY if g is None else g for g in geoms], dtype=object), return_index=True
-    )
-    cell = np.array(keys, dtype=np.int64).reshape(-1, 2)[which]
-    # per side of a target (0 bottom, 1 right, 2 top, 3 left), what lies on that line:
-    # the target's own vertices, and its neighbour's inside the side (node candidates)
-    t_of = {ix: n for n, ix in enumerate(target)}
+    ``xy``: every vertex of the targets' and neighbours' regions, ``cell``: its cell."""
     own_g, own_t, cand_g, cand_t, cand_a = [], [], [], [], []
     for side, (di, dj), across in (
         (0, (0, -1), 1),
@@ -136,7 +113,7 @@ def _node_borders(
         cand_a.append(xy[k[ok], 1 - across])
     own_g, own_t = np.concatenate(own_g), np.concatenate(own_t)
     cand_g, cand_t, cand_a = (np.concatenate(x) for x in (cand_g, cand_t, cand_a))
-    has_own = np.zeros(len(target), dtype=bool)
+    has_own = np.zeros(n_targets, dtype=bool)
     has_own[np.unique(own_g // 4)] = True
     keep = has_own[cand_g // 4]  # an empty region is not noded
     # vertices the region already has there need no node
@@ -155,6 +132,12 @@ def _node_borders(
     for g in np.unique(cand_g).tolist():
         along = cand_a[cand_g == g]  # the vertices' own coordinates: exactly on the grid
         extra.setdefault(g // 4, [[], [], [], []])[g % 4] = sorted(set(along.tolist()))
+    return extra
+
+
+def _noded_boxes(extra: dict, target: dict, size: float) -> tuple[list, list]:
+    """For each target with extra nodes: its index in the regions and its cell square
+    with those nodes as vertices."""
     ks, boxes = [], []
     tlist = list(target)
     for n, sides in sorted(extra.items()):
@@ -167,6 +150,39 @@ def _node_borders(
         ring += [(x0, y1)] + [(x0, y) for y in reversed(sides[3])]
         ks.append(target[(i, j)])
         boxes.append(shapely.Polygon(ring))
+    return ks, boxes
+
+
+def _node_borders(
+    idxs: list[CellIndex],
+    regions: np.ndarray,
+    old_cells: Mapping[CellIndex, Cell],
+    size: float,
+    need: set[CellIndex],
+) -> np.ndarray:
+    """Each region with a vertex wherever a neighbour's boundary meets their shared border.
+
+    A cell's border vector spans between its own vertices; explored space across it may
+    cover only part of it (a notch of the neighbour). Intersecting the region with its
+    cell square carrying those extra vertices nodes the region's border edges there
+    (the overlay keeps every vertex of both inputs on shared edges; all are on the grid,
+    so the geometry does not change). Only the cells in ``need`` are noded."""
+    new = dict(zip(idxs, regions, strict=True))
+    target = {ix: k for k, ix in enumerate(idxs) if ix in need}
+    if not target:
+        return regions
+    # every vertex of the targets' regions and of their neighbours', with its cell
+    keys = list(dict.fromkeys([*target, *(n for ix in target for n in _neighbours(ix))]))
+    geoms = [_region_at(ix, new, old_cells) for ix in keys]
+    xy, which = shapely.get_coordinates(
+        np.array([_EMPTY if g is None else g for g in geoms], dtype=object), return_index=True
+    )
+    cell = np.array(keys, dtype=np.int64).reshape(-1, 2)[which]
+    # per side of a target (0 bottom, 1 right, 2 top, 3 left), what lies on that line:
+    # the target's own vertices, and its neighbour's inside the side (node candidates)
+    t_of = {ix: n for n, ix in enumerate(target)}
+    extra = _extra_nodes(xy, cell, t_of, size, len(target))
+    ks, boxes = _noded_boxes(extra, target, size)
     if not ks:
         return regions
     out = regions.copy()
