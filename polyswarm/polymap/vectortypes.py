@@ -172,10 +172,16 @@ def _typed_polygons(
     nxt = s_rep + (local + 1) % n_rep
     area2 = np.add.reduceat(x * y[nxt] - x[nxt] * y, starts_at)
 
+    return _group_rings(a, types, owner, ring_poly[ring_ids], starts_at, counts, area2)
+
+
+def _group_rings(a, types, owner, poly_of_ring, starts_at, counts, area2) -> dict:
+    """Canonical rings (``a``, ``types``; ring r from ``starts_at[r]``, ``counts[r]``
+    vertices, twice its signed area ``area2[r]``) as typed polygons grouped by ``owner``
+    of their polygon (``poly_of_ring``); a collapsed shell drops its polygon."""
     grouped: dict[int, list[list[Ring]]] = {}
     shell_slot: dict[int, int] = {}
-    poly_of_ring = ring_poly[ring_ids]
-    for r in range(len(ring_ids)):
+    for r in range(len(starts_at)):
         lo, n = int(starts_at[r]), int(counts[r])
         if n < 3:
             continue
