@@ -36,6 +36,64 @@ class InProcessRun:
     coverage: list[tuple[float, float]]  # (simulated s, fraction of the free space)
 
 
+def _agent_event(ev, sim, agents, coord, on_keyframe, on_pose) -> int:
+    """One scan event: the agent's step, its commands to the simulator, its map update,
+    pose and status to the coordinator and the other agents; the bytes it sent."""
+    from protocols.chunks import MAP_KIND_OF
+    from protocols.mapcodec import encode_updates
+    from protocols.messages import Odometry
+
+    sent = 0
+    a = agents[ev.robot]
+    a.on_odom(sim.time, Odometry(*ev.odom))
+    out = a.on_scan(sim.time, ev.scan)  # now: the end of its sweep
+    if out.cmd:
+        sim.set_cmd(ev.robot, *out.cmd)
+    if out.delta is not None:  # what the agent sends: the merge or the cells
+        for what, _, _, wire in encode_updates(out.delta, out.op, out.correction):
+            sent += len(wire)
+            coord.on_robot_update(a.id, sim.time, MAP_KIND_OF[what], wire)
+        if on_keyframe is not None:
+            on_keyframe(
+                a.id,
+                sim.time,
+                ev.scan,
+                a.pose.copy(),
+                out.delta,
+                out.op,
+                out.correction,
+            )
+    if out.pose is not None:
+        if on_pose is not None:
+            on_pose(ev.robot, sim.time, out.pose)
+        coord.on_pose(a.id, sim.time, out.pose)
+        for b in agents:
+            b.on_peer_pose(a.id, sim.time, out.pose)
+    if out.status is not None:
+        coord.on_status(a.id, sim.time, out.status)
+    return sent
+
+
+def _coordinate(coord, agents, now_s: float) -> None:
+    """The coordinator's turn: replays taken in, merged deltas flushed, a cycle when due
+    (assignments to the agents), the merged map to every agent."""
+    for rid, got in coord.take_in():  # replayed on the pool's processes
+        if isinstance(got, MapError):  # the robot's map, as a resync fetches it
+            coord.on_robot_map(rid, agents[int(rid[1:]) - 1].slam.map)
+    deltas = [coord.flush()] if coord.flush_due() else []
+    if coord.due():
+        o = coord.cycle()
+        deltas.append(o.merged_delta)
+        for rid, asg in o.assignments.items():
+            agents[int(rid[1:]) - 1].on_assignment(asg, now_s)
+    for merged in filter(None, deltas):
+        for b in agents:
+            if b.merged is None:
+                b.on_merged_map(coord.merged)
+            else:
+                b.on_merged_delta(merged)
+
+
 def explore_in_process(
     world_name: str,
     robots: int,
@@ -64,9 +122,7 @@ def explore_in_process(
     from agents.merger import MergeProcess
     from agents.replay import ReplayPool
     from agents.robot import RobotAgent
-    from protocols.chunks import MAP_KIND_OF
-    from protocols.mapcodec import encode_updates
-    from protocols.messages import MissionState, Odometry
+    from protocols.messages import MissionState
     from sim import Simulation, load_world, spread_start_poses
 
     cfg = cfg or Config()
@@ -100,52 +156,12 @@ def explore_in_process(
         while sim.time < sim_s:
             events = sim.step()
             for ev in events:
-                a = agents[ev.robot]
-                a.on_odom(sim.time, Odometry(*ev.odom))
-                out = a.on_scan(sim.time, ev.scan)  # now: the end of its sweep
-                if out.cmd:
-                    sim.set_cmd(ev.robot, *out.cmd)
-                if out.delta is not None:  # what the agent sends: the merge or the cells
-                    for what, _, _, wire in encode_updates(out.delta, out.op, out.correction):
-                        delta_bytes += len(wire)
-                        coord.on_robot_update(a.id, sim.time, MAP_KIND_OF[what], wire)
-                    if on_keyframe is not None:
-                        on_keyframe(
-                            a.id,
-                            sim.time,
-                            ev.scan,
-                            a.pose.copy(),
-                            out.delta,
-                            out.op,
-                            out.correction,
-                        )
-                if out.pose is not None:
-                    if on_pose is not None:
-                        on_pose(ev.robot, sim.time, out.pose)
-                    coord.on_pose(a.id, sim.time, out.pose)
-                    for b in agents:
-                        b.on_peer_pose(a.id, sim.time, out.pose)
-                if out.status is not None:
-                    coord.on_status(a.id, sim.time, out.status)
+                delta_bytes += _agent_event(ev, sim, agents, coord, on_keyframe, on_pose)
             if not events:
                 continue
             if on_step is not None:
                 on_step(sim, agents, coord)
-            for rid, got in coord.take_in():  # replayed on the pool's processes
-                if isinstance(got, MapError):  # the robot's map, as a resync fetches it
-                    coord.on_robot_map(rid, agents[int(rid[1:]) - 1].slam.map)
-            deltas = [coord.flush()] if coord.flush_due() else []
-            if coord.due():
-                o = coord.cycle()
-                deltas.append(o.merged_delta)
-                for rid, asg in o.assignments.items():
-                    agents[int(rid[1:]) - 1].on_assignment(asg, sim.time)
-            for merged in filter(None, deltas):
-                for b in agents:
-                    if b.merged is None:
-                        b.on_merged_map(coord.merged)
-                    else:
-                        b.on_merged_delta(merged)
+            _coordinate(coord, agents, sim.time)
             if sim.time >= next_sample:
                 next_sample += 1.0
                 region = coord.merged.explored_region()
