@@ -46,6 +46,101 @@ def trajectory(n_scans: int, rate_hz: float = 10.0):
     return t + 100.0, np.stack([x, y, phi + math.pi / 2], axis=1)
 
 
+_MX, _MY, _MYAW, _ = MOUNT
+_INC = -2 * math.pi / BEAMS  # upside down: the sensor's angles run clockwise
+_ANGLE_MIN = math.pi - 1e-6
+
+
+class _Messages:
+    """The messages of a made bag: headers, transforms, scans and odometry of the route."""
+
+    def __init__(
+        self,
+        T,
+        ros1: bool,
+        n_scans: int,
+        blind: bool,
+        odom_shift_s: float,
+        mount_yaw_error_rad: float,
+    ) -> None:
+        self.T, self.ros1, self.blind = T, ros1, blind
+        self.odom_shift_s, self.mount_yaw_error_rad = odom_shift_s, mount_yaw_error_rad
+        self.stamps, self.poses = trajectory(n_scans)
+        self.odo = self.poses.copy()
+        self.odo[:, 2] += 0.002 * np.arange(n_scans)  # heading drift: 0.02 rad/s
+
+    def header(self, t: float, frame: str):
+        sec = math.floor(t)
+        stamp = self.T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int((t - sec) * 1e9))
+        if self.ros1:
+            return self.T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+        return self.T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+
+    def transform(self, parent, child, xyz, quat):
+        return self.T["geometry_msgs/msg/TransformStamped"](
+            header=self.header(self.stamps[0], parent),
+            child_frame_id=child,
+            transform=self.T["geometry_msgs/msg/Transform"](
+                translation=self.T["geometry_msgs/msg/Vector3"](x=xyz[0], y=xyz[1], z=xyz[2]),
+                rotation=self.T["geometry_msgs/msg/Quaternion"](
+                    x=quat[0], y=quat[1], z=quat[2], w=quat[3]
+                ),
+            ),
+        )
+
+    def scan_msg(self, k: int):
+        x, y, th = self.poses[k]
+        sx, sy = (
+            x + _MX * math.cos(th) - _MY * math.sin(th),
+            y + _MX * math.sin(th) + _MY * math.cos(th),
+        )
+        sensor = _ANGLE_MIN + _INC * np.arange(BEAMS)
+        world = th + _MYAW - sensor  # upside down: a sensor angle points the other way
+        r = ray_cast((sx, sy), world)
+        r = np.where((r <= RANGE_MAX_M) & (not self.blind), r, np.inf).astype(np.float32)
+        return self.T["sensor_msgs/msg/LaserScan"](
+            header=self.header(self.stamps[k], "laser"),
+            angle_min=_ANGLE_MIN,
+            angle_max=_ANGLE_MIN + _INC * (BEAMS - 1),
+            angle_increment=_INC,
+            time_increment=0.0,
+            scan_time=0.1,
+            range_min=0.12,
+            range_max=RANGE_MAX_M,
+            ranges=r,
+            intensities=np.zeros(0, dtype=np.float32),
+        )
+
+    def odom_msg(self, k: int):
+        x, y, th = self.odo[k]
+        cov = np.zeros(36)
+        return self.T["nav_msgs/msg/Odometry"](
+            header=self.header(self.stamps[k] + self.odom_shift_s, "odom"),
+            child_frame_id="base_footprint",
+            pose=self.T["geometry_msgs/msg/PoseWithCovariance"](
+                pose=self.T["geometry_msgs/msg/Pose"](
+                    position=self.T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                    orientation=self.T["geometry_msgs/msg/Quaternion"](
+                        x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)
+                    ),
+                ),
+                covariance=cov,
+            ),
+            twist=self.T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=self.T["geometry_msgs/msg/Twist"](
+                    linear=self.T["geometry_msgs/msg/Vector3"](x=0.31, y=0.0, z=0.0),
+                    angular=self.T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.157),
+                ),
+                covariance=cov.copy(),
+            ),
+        )
+
+    def mount_tf(self, dx: float = 0.0):
+        e = self.mount_yaw_error_rad / 2  # roll pi, then the yaw error about the base's z axis
+        quat = (math.cos(e), math.sin(e), 0.0, 0.0)
+        return self.transform("base_link", "laser", (_MX + dx, _MY, 0.2), quat)
+
+
 def make_bag(
     path: Path,
     kind: str = "mcap",
@@ -79,101 +174,28 @@ def make_bag(
         defn = "geometry_msgs/TransformStamped[] transforms"
         store.register(get_types_from_msg(defn, "tf2_msgs/msg/TFMessage"))
     T = store.types
-    stamps, poses = trajectory(n_scans)
-    odo = poses.copy()
-    odo[:, 2] += 0.002 * np.arange(n_scans)  # heading drift: 0.02 rad/s
-    mx, my, myaw, _ = MOUNT
-    inc = -2 * math.pi / BEAMS  # upside down: the sensor's angles run clockwise
-    angle_min = math.pi - 1e-6
+    m = _Messages(T, ros1, n_scans, blind, odom_shift_s, mount_yaw_error_rad)
+    stamps, odo = m.stamps, m.odo
 
-    def header(t: float, frame: str):
-        sec = math.floor(t)
-        stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int((t - sec) * 1e9))
-        if ros1:
-            return T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
-        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
-
-    def transform(parent, child, xyz, quat):
-        return T["geometry_msgs/msg/TransformStamped"](
-            header=header(stamps[0], parent),
-            child_frame_id=child,
-            transform=T["geometry_msgs/msg/Transform"](
-                translation=T["geometry_msgs/msg/Vector3"](x=xyz[0], y=xyz[1], z=xyz[2]),
-                rotation=T["geometry_msgs/msg/Quaternion"](
-                    x=quat[0], y=quat[1], z=quat[2], w=quat[3]
-                ),
-            ),
-        )
-
-    def scan_msg(k: int):
-        x, y, th = poses[k]
-        sx, sy = (
-            x + mx * math.cos(th) - my * math.sin(th),
-            y + mx * math.sin(th) + my * math.cos(th),
-        )
-        sensor = angle_min + inc * np.arange(BEAMS)
-        world = th + myaw - sensor  # upside down: a sensor angle points the other way
-        r = ray_cast((sx, sy), world)
-        r = np.where((r <= RANGE_MAX_M) & (not blind), r, np.inf).astype(np.float32)
-        return T["sensor_msgs/msg/LaserScan"](
-            header=header(stamps[k], "laser"),
-            angle_min=angle_min,
-            angle_max=angle_min + inc * (BEAMS - 1),
-            angle_increment=inc,
-            time_increment=0.0,
-            scan_time=0.1,
-            range_min=0.12,
-            range_max=RANGE_MAX_M,
-            ranges=r,
-            intensities=np.zeros(0, dtype=np.float32),
-        )
-
-    def odom_msg(k: int):
-        x, y, th = odo[k]
-        cov = np.zeros(36)
-        return T["nav_msgs/msg/Odometry"](
-            header=header(stamps[k] + odom_shift_s, "odom"),
-            child_frame_id="base_footprint",
-            pose=T["geometry_msgs/msg/PoseWithCovariance"](
-                pose=T["geometry_msgs/msg/Pose"](
-                    position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-                    orientation=T["geometry_msgs/msg/Quaternion"](
-                        x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)
-                    ),
-                ),
-                covariance=cov,
-            ),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](
-                    linear=T["geometry_msgs/msg/Vector3"](x=0.31, y=0.0, z=0.0),
-                    angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.157),
-                ),
-                covariance=cov.copy(),
-            ),
-        )
-
-    def mount_tf(dx: float = 0.0):
-        e = mount_yaw_error_rad / 2  # roll pi, then the yaw error about the base's z axis
-        quat = (math.cos(e), math.sin(e), 0.0, 0.0)
-        return transform("base_link", "laser", (mx + dx, my, 0.2), quat)
-
-    base = transform("base_footprint", "base_link", (0.0, 0.0, 0.05), (0.0, 0.0, 0.0, 1.0))
+    base = m.transform("base_footprint", "base_link", (0.0, 0.0, 0.05), (0.0, 0.0, 0.0, 1.0))
     tfm = "tf2_msgs/msg/TFMessage"
     first = int(stamps[0] * 1e9) - 1
-    messages = [(first, mount_topic, tfm, T[tfm](transforms=[base, mount_tf()]))]
+    messages = [(first, mount_topic, tfm, T[tfm](transforms=[base, m.mount_tf()]))]
     if tf_mount_error_m is not None:
-        messages.append((first, "/tf", tfm, T[tfm](transforms=[base, mount_tf(tf_mount_error_m)])))
+        messages.append(
+            (first, "/tf", tfm, T[tfm](transforms=[base, m.mount_tf(tf_mount_error_m)]))
+        )
     for k in range(n_scans):
         ns = int(stamps[k] * 1e9)
-        messages.append((ns, "/odom", "nav_msgs/msg/Odometry", odom_msg(k)))
+        messages.append((ns, "/odom", "nav_msgs/msg/Odometry", m.odom_msg(k)))
         if defects and k == 20:
-            messages.append((ns, "/odom", "nav_msgs/msg/Odometry", odom_msg(k)))
+            messages.append((ns, "/odom", "nav_msgs/msg/Odometry", m.odom_msg(k)))
         if mount_topic == "/tf":  # the moving part of the tree, beside the mount
             x, y, th = odo[k]
             q = (0.0, 0.0, math.sin(th / 2), math.cos(th / 2))
-            moving = transform("odom", "base_footprint", (x, y, 0.0), q)
-            messages.append((ns, "/tf", tfm, T[tfm](transforms=[moving, base, mount_tf()])))
-        scan = scan_msg(31 if defects and k == 30 else 30 if defects and k == 31 else k)
+            moving = m.transform("odom", "base_footprint", (x, y, 0.0), q)
+            messages.append((ns, "/tf", tfm, T[tfm](transforms=[moving, base, m.mount_tf()])))
+        scan = m.scan_msg(31 if defects and k == 30 else 30 if defects and k == 31 else k)
         if defects and k == 10:
             scan.ranges = np.zeros(0, dtype=np.float32)
         for topic in ("/scan", *scan_copies):
