@@ -65,6 +65,48 @@ def _odom_msg(t, x, y, yaw, v=0.0, w=0.0) -> RosOdometry:
     return m
 
 
+def _wait_for_agent(player, scan_pub, odom_pub, name: str) -> set[str]:
+    """The graph's node names once ``name`` is among them and both topics are matched
+    (at most 20 s)."""
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline:
+        nodes = {f"{ns.rstrip('/')}/{n}" for n, ns in player.get_node_names_and_namespaces()}
+        matched = scan_pub.get_subscription_count() and odom_pub.get_subscription_count()
+        if name in nodes and matched:
+            break
+        time.sleep(0.2)
+    return nodes
+
+
+def _play(bag, scan_pub, odom_pub) -> None:
+    """The recording's odometry and scans into the graph, in stamp order, at 20 Hz."""
+    o = bag.odometry
+    dt = np.maximum(np.diff(o[:, 0]), 1e-3)
+    yaw = np.unwrap(o[:, 3])
+    v = np.hypot(*np.diff(o[:, 1:3], axis=0).T) / dt
+    velocity = np.vstack([np.c_[v, np.diff(yaw) / dt], [0.0, 0.0]])
+    time.sleep(1.0)  # both ends of the scan topic matched before the first sweep
+    k_odom = 0
+    for s in bag.scans:
+        end = s.stamp + s.time_increment * (len(s.ranges) - 1)
+        while k_odom < len(bag.odometry) and bag.odometry[k_odom, 0] <= end + 0.05:
+            odom_pub.publish(_odom_msg(*bag.odometry[k_odom], *velocity[k_odom]))
+            k_odom += 1
+        scan_pub.publish(_scan_msg(s, bag.scan_frame))
+        time.sleep(0.05)  # 20 Hz: four times the recording's rate
+
+
+def _until_quiet(maps: list) -> None:
+    """Wait until no map has come for 5 s (the agent has worked off its queue; at most
+    90 s)."""
+    quiet_since, seen = time.monotonic(), len(maps)
+    deadline = time.monotonic() + 90.0
+    while time.monotonic() - quiet_since < 5.0 and time.monotonic() < deadline:
+        time.sleep(0.2)  # the agent works off its queue: maps keep coming
+        if len(maps) != seen:
+            quiet_since, seen = time.monotonic(), len(maps)
+
+
 def test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node(shared_data):
     path = shared_data / "bags" / "neato-square.bag"
     bag = read_bag(path)
@@ -104,36 +146,10 @@ def test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node(shared_da
                 )
             )
             agent_thread.start()
-            deadline = time.monotonic() + 20.0
-            while time.monotonic() < deadline:
-                nodes = {
-                    f"{ns.rstrip('/')}/{n}" for n, ns in player.get_node_names_and_namespaces()
-                }
-                matched = scan_pub.get_subscription_count() and odom_pub.get_subscription_count()
-                if "/neato/polyswarm_agent_r1" in nodes and matched:
-                    break
-                time.sleep(0.2)
+            nodes = _wait_for_agent(player, scan_pub, odom_pub, "/neato/polyswarm_agent_r1")
             assert "/neato/polyswarm_agent_r1" in nodes, nodes  # as `ros2 node list` shows it
-            o = bag.odometry
-            dt = np.maximum(np.diff(o[:, 0]), 1e-3)
-            yaw = np.unwrap(o[:, 3])
-            v = np.hypot(*np.diff(o[:, 1:3], axis=0).T) / dt
-            velocity = np.vstack([np.c_[v, np.diff(yaw) / dt], [0.0, 0.0]])
-            time.sleep(1.0)  # both ends of the scan topic matched before the first sweep
-            k_odom = 0
-            for s in bag.scans:
-                end = s.stamp + s.time_increment * (len(s.ranges) - 1)
-                while k_odom < len(bag.odometry) and bag.odometry[k_odom, 0] <= end + 0.05:
-                    odom_pub.publish(_odom_msg(*bag.odometry[k_odom], *velocity[k_odom]))
-                    k_odom += 1
-                scan_pub.publish(_scan_msg(s, bag.scan_frame))
-                time.sleep(0.05)  # 20 Hz: four times the recording's rate
-            quiet_since, seen = time.monotonic(), len(maps)
-            deadline = time.monotonic() + 90.0
-            while time.monotonic() - quiet_since < 5.0 and time.monotonic() < deadline:
-                time.sleep(0.2)  # the agent works off its queue: maps keep coming
-                if len(maps) != seen:
-                    quiet_since, seen = time.monotonic(), len(maps)
+            _play(bag, scan_pub, odom_pub)
+            _until_quiet(maps)
             stop.set()
             agent_thread.join(timeout=20)
     finally:
