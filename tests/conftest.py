@@ -91,3 +91,36 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.stem in WHOLE_RUNS or item.originalname in LONG_TESTS:
             item.add_marker(pytest.mark.slow)
+
+
+# --- a coordinator and its robots' maps ----------------------------------------------------
+
+
+def corridor_map(open_end: bool):
+    from polyswarm.polymap import GridPolyMap
+
+    """A 12 m x 2 m corridor, its right end a frontier (or a wall)."""
+    return GridPolyMap(2.0).merge(rect(0.0, 0.0, 12.0, 2.0, (O, F if open_end else O, O, O))).map
+
+
+def coordinator(n: int = 2):
+    """A coordinator of ``n`` robots, all alive, 1 m apart along y = 1."""
+    from agents.coordinator import Coordinator
+    from polyswarm.config import Config
+    from protocols.messages import Pose
+
+    starts = {f"r{k + 1}": (1.0 + k, 1.0, 0.0) for k in range(n)}
+    c = Coordinator(Config(), starts)
+    for rid, (x, y, _) in starts.items():
+        c.on_alive(rid, True)
+        c.on_pose(rid, 0.0, Pose(x, y, 0.0))
+    return c
+
+
+def feed(c, rid: str, pmap, t: float) -> None:
+    """``pmap`` to the coordinator as robot ``rid``'s cell delta, through the codec."""
+    from protocols.mapcodec import decode_delta, encode_delta
+
+    base = c.robot(rid).map
+    delta = pmap.delta_since(0 if base is None else base.version)
+    c.on_robot_delta(rid, t, decode_delta(encode_delta(delta)))
