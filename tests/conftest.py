@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, settings
 
-from polyswarm.polymap import Ring, TypedPolygon, VectorType
+from polyswarm.polymap import MergeOptions, Ring, TypedPolygon, VectorType
 
 settings.register_profile(
     "ci", max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow]
@@ -124,3 +124,176 @@ def feed(c, rid: str, pmap, t: float) -> None:
     base = c.robot(rid).map
     delta = pmap.delta_since(0 if base is None else base.version)
     c.on_robot_delta(rid, t, decode_delta(encode_delta(delta)))
+
+
+# --- a building, mapped by robots in frames of their own (map matching) --------------------
+
+CELL_M = 2.0
+
+
+def building():
+    import shapely
+    from shapely.geometry import box
+
+    """A corridor with rooms of different sizes off it, a pillar in one: no symmetry."""
+    parts = [
+        box(0, 0, 24, 2),  # corridor
+        box(1, 2, 5, 7),
+        box(6, 2, 9, 5),
+        box(11, 2, 17, 8),
+        box(19, 2, 23, 4),
+        box(2, -6, 8, 0),
+        box(13, -3, 15, 0),
+        box(17, -7, 23, 0),
+    ]
+    doors_closed = shapely.union_all(parts)
+    return shapely.difference(doors_closed, box(19, -5, 20, -4))  # the pillar
+
+
+def typed_regions(region, walls) -> list[TypedPolygon]:
+    import shapely
+    import shapely.geometry
+
+    """Typed polygons of ``region``: edges on ``walls`` are obstacles, others frontiers."""
+    out = []
+    polys = [g for g in getattr(region, "geoms", [region]) if g.geom_type == "Polygon"]
+    for piece in polys:
+        p = shapely.geometry.polygon.orient(piece, 1.0)  # shell ccw, holes clockwise
+        rings = []
+        for ring in [p.exterior, *p.interiors]:
+            xy = np.asarray(ring.coords)[:-1]
+            mids = 0.5 * (xy + np.roll(xy, -1, axis=0))
+            on_wall = shapely.distance(walls, shapely.points(mids)) < 1e-6
+            types = np.where(on_wall, VectorType.OBSTACLE, VectorType.FRONTIER)
+            rings.append(Ring(xy, types))
+        out.append(TypedPolygon(rings[0], tuple(rings[1:])))
+    return out
+
+
+def seen_map(window, pose=(0.0, 0.0, 0.0)):
+    import shapely
+
+    from polyswarm.frames.mapmatch import transform_map
+    from polyswarm.polymap import GridPolyMap
+    from polyswarm.se2 import inverse
+
+    """The part of the building inside ``window``, as a robot whose frame is ``pose`` (in
+    the building's frame) would have mapped it."""
+    b = building()
+    part = shapely.intersection(b, window)
+    m = GridPolyMap.from_polygons(typed_regions(part, b.boundary), CELL_M)
+    return transform_map(m, inverse(np.asarray(pose, dtype=float)))
+
+
+def profile_with_a_robot_at(xy, clear_m: float = 10.0) -> bytes:
+    """A clear profile: clear to ``clear_m`` all around, and a robot's body at ``xy``
+    (metres, the viewer's frame)."""
+    from polyswarm.frames.sighting import BODY_M, CLEAR_UNIT_M, SECTORS, _sector
+
+    out = [int(clear_m / CLEAR_UNIT_M)] * SECTORS
+    d = float(np.hypot(*xy)) - BODY_M / 2
+    out[int(_sector(np.arctan2(xy[1], xy[0])))] = int(d / CLEAR_UNIT_M)
+    return bytes(out)
+
+
+# --- robot merges replayed (a corridor and side rooms) --------------------------------------
+
+REPLAY_OPTS = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
+# keyframe polygons of a robot driving along a corridor and into side rooms
+RECTS = [
+    (-0.5, -0.5, 3.3, 0.7, (O, F, O, F)),
+    (3.0, -0.5, 5.1, 0.7, (O, F, O, O)),
+    (4.2, 0.6, 4.9, 2.5, (O, O, O, F)),
+    (-0.4, 0.6, 0.4, 2.5, (O, O, F, O)),
+    (4.0, 2.4, 7.5, 4.1, (O, F, O, F)),
+]
+
+
+def shifted(r, dy: float):
+    x0, y0, x1, y1, types = r
+    return rect(x0, y0 + dy, x1, y1 + dy, types)
+
+
+def ops_of(polys):
+    from polyswarm.polymap import GridPolyMap, MergeOp, cells_digest
+
+    """A robot's map after merging ``polys``, and the merges it sent."""
+    pmap, ops = GridPolyMap(2.0), []
+    for poly in polys:
+        res = pmap.merge(poly, REPLAY_OPTS)
+        digest = cells_digest(res.map.cells[i] for i in res.changed)
+        ops.append(MergeOp(2.0, pmap.version, res.map.version, poly, REPLAY_OPTS, digest))
+        pmap = res.map
+    return pmap, ops
+
+
+def same(a, b) -> bool:
+    from polyswarm.polymap import cells_digest
+
+    return a.version == b.version and cells_digest(a.cells.values()) == cells_digest(
+        b.cells.values()
+    )
+
+
+# --- launches and sessions ---------------------------------------------------------------
+
+
+def assert_nothing_lost(out) -> None:
+    """The coordinator's merged map holds everything it received from each robot, and
+    each robot still holds everything it sent (deltas in flight at shutdown are in the
+    robot's own persisted map)."""
+    from polyswarm.benchmarks.faults import lost_space
+
+    lost = lost_space(out)
+    assert set(lost) == {"r1", "r2"}
+    for r, v in lost.items():
+        assert v["missing_m2"] <= 1e-3 * v["shared_m2"], f"{v} of {r} not in the merge"
+        assert v["dropped_m2"] <= 1e-3 * v["shared_m2"], f"{r} lost what it had sent: {v}"
+
+
+def kill_by_pid(out, name: str) -> int:
+    """SIGKILL process ``name`` of the launch writing to ``out`` by its process id
+    (``logs/pids.json``), as the kernel's out-of-memory killer would: not through
+    launch's fault injection. Returns the id."""
+    import json
+    import os
+    import signal
+
+    pid = json.loads((out / "logs" / "pids.json").read_text())[name]
+    os.kill(pid, signal.SIGKILL)
+    return pid
+
+
+def free_endpoint() -> str:
+    """A TCP endpoint on 127.0.0.1 no one listens on (yet)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+# --- a room with a pillar, scanned (ICP and the pose graph) ---------------------------------
+
+ANGLES = np.linspace(-2.35, 2.35, 720)
+
+
+def room():
+    """A 6 m x 4 m room (counter-clockwise: free inside) with a pillar (clockwise), as
+    vectors (starts, ends)."""
+    outer = np.array([[0, 0], [6, 0], [6, 4], [0, 4]], float)
+    pillar = np.array([[2, 2.5], [2, 3], [2.5, 3], [2.5, 2.5]], float)
+    s = np.vstack([outer, pillar])
+    e = np.vstack([np.roll(outer, -1, 0), np.roll(pillar, -1, 0)])
+    return s, e
+
+
+def scan_at(pose, s, e, sigma=0.01, seed=0):
+    """A 720-beam scan's points (sensor frame) at ``pose`` among vectors ``s``-``e``,
+    noise ``sigma`` metres."""
+    from polyswarm.raycast import cast_rays
+
+    r = cast_rays(pose[:2], ANGLES + pose[2], s, e, 30.0)
+    r = r + np.random.default_rng(seed).normal(0, sigma, len(r))
+    ok = np.isfinite(r)
+    return np.stack([r[ok] * np.cos(ANGLES[ok]), r[ok] * np.sin(ANGLES[ok])], 1)

@@ -72,11 +72,11 @@ def test_a_robot_is_merged_only_after_agreeing_matches_and_its_own_move():
 
     from agents.anchoring import Anchoring
     from agents.coordinator import Coordinator
-    from tests.test_mapmatch import _seen
+    from tests.conftest import seen_map
 
     truth = np.array([4.0, -3.0, 2.1])
-    a = _seen(box(-1, -8, 16, 9))  # r1's map, the shared frame
-    b = _seen(box(8, -8, 25, 9), truth)  # r2's, in its own frame
+    a = seen_map(box(-1, -8, 16, 9))  # r1's map, the shared frame
+    b = seen_map(box(8, -8, 25, 9), truth)  # r2's, in its own frame
     cfg = Config()
     main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
     main.on_robot_map("r1", a)
@@ -121,7 +121,7 @@ def _see_each_other(frames, truth, moments: int = 7) -> None:
     origin (which ``truth`` puts at (4 m, -3 m) in the shared frame) through a room of
     the building: 1.8 m along the shared x axis, then 1.8 m along -y."""
     from protocols.messages import Pose
-    from tests.test_sighting import profile_with_a_robot_at
+    from tests.conftest import profile_with_a_robot_at
 
     for k in range(moments):
         there = truth[:2] + 0.6 * np.array([min(k, 3), -max(k - 3, 0)])
@@ -140,18 +140,18 @@ def _r2_waiting():
     from agents.anchoring import Anchoring
     from agents.coordinator import Coordinator
     from protocols.messages import Pose
-    from tests.test_mapmatch import _seen
+    from tests.conftest import seen_map
 
     truth = np.array([4.0, -3.0, 2.1])
     cfg = Config()
     main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
-    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    main.on_robot_map("r1", seen_map(box(-1, -8, 16, 9)))
     main.on_pose("r1", 0.0, Pose(0.0, 0.0, 0.0))
     main.on_alive("r1", True)
     main.flush()
     frames = Anchoring(cfg, ["r2"])
     solo = frames.owner("r2", main)
-    solo.on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
+    solo.on_robot_map("r2", seen_map(box(8, -8, 25, 9), truth))
     solo.on_pose("r2", 0.0, Pose(0.0, 0.0, 0.0))
     solo.on_alive("r2", True)
     return truth, main, frames, solo
@@ -224,15 +224,15 @@ def test_a_frame_that_puts_the_robot_where_another_saw_nothing_is_never_committe
     from agents.coordinator import Coordinator
     from polyswarm.frames.sighting import CLEAR_UNIT_M, SECTORS
     from protocols.messages import Pose
-    from tests.test_mapmatch import _seen
+    from tests.conftest import seen_map
 
     truth = np.array([4.0, -3.0, 2.1])
     cfg = Config()
     main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
-    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    main.on_robot_map("r1", seen_map(box(-1, -8, 16, 9)))
     main.flush()
     frames = Anchoring(cfg, ["r2"])
-    frames.owner("r2", main).on_robot_map("r2", _seen(box(8, -8, 25, 9), truth))
+    frames.owner("r2", main).on_robot_map("r2", seen_map(box(8, -8, 25, 9), truth))
     clear_10m = bytes([int(10 / CLEAR_UNIT_M)] * SECTORS)
     for k in range(20):
         frames.sighted("r1", 0.5 * k, Pose(0.0, 0.0, 0.0, clear=clear_10m))
@@ -283,7 +283,7 @@ def test_a_robot_seen_where_the_candidate_frame_puts_it_tours_before_exploring()
     place, too few to commit; r2's solo coordinator sends it to tour standpoints in sight
     of r1 before its own frontiers (``tour_first``)."""
 
-    from tests.test_sighting import profile_with_a_robot_at
+    from tests.conftest import profile_with_a_robot_at
 
     truth, main, frames, solo = _r2_waiting()
     w = frames.waiting["r2"]
@@ -300,7 +300,7 @@ def test_an_idle_swarm_robot_tours_in_sight_of_a_waiting_one(out_of_frontiers):
     frame puts the waiting robot is drawn to that place (and tours standpoints there,
     ``Coordinator.rendezvous``): a robot standing still is seen in one place only. While
     the swarm explores it is not."""
-    from tests.test_sighting import profile_with_a_robot_at
+    from tests.conftest import profile_with_a_robot_at
 
     truth, main, frames, solo = _r2_waiting()
     main.out_of_frontiers = out_of_frontiers
@@ -327,17 +327,17 @@ def _handed_over(frame_sent):
 
     from agents.anchoring import Anchoring
     from agents.coordinator import Coordinator
-    from tests.test_mapmatch import _seen
+    from tests.conftest import seen_map
 
     truth = np.array([4.0, -3.0, 2.1])
     cfg = Config()
     main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
-    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    main.on_robot_map("r1", seen_map(box(-1, -8, 16, 9)))
     main.on_alive("r1", True)
     main.flush()
     area = main.merged.explored_area()
     frames = Anchoring(cfg, ["r2"])
-    b = _seen(box(8, -8, 25, 9), truth)
+    b = seen_map(box(8, -8, 25, 9), truth)
     frames.owner("r2", main).on_robot_map("r2", b)
     frames.waiting["r2"].frames.pose = np.asarray(frame_sent, dtype=float)  # committed
     [(rid, anchor)] = frames.tick(main, 0.0)
@@ -376,7 +376,7 @@ def test_a_merge_contradicted_later_is_undone_and_the_frame_found_again(sighting
     from agents.anchoring import RESEND_S
     from agents.audits import UNDO_AUDITS, UNDO_CONTRADICTIONS
     from protocols.messages import Pose
-    from tests.test_sighting import profile_with_a_robot_at
+    from tests.conftest import profile_with_a_robot_at
 
     truth = np.array([4.0, -3.0, 2.1])
     wrong = compose(truth, np.array([3.0, 0.0, 0.0]))
@@ -430,7 +430,7 @@ def test_a_merge_the_sightings_agree_with_is_audited_and_kept():
     every moment: the audits run and find nothing against it (no moment, no wall in
     r1's clear space)."""
     from protocols.messages import Pose
-    from tests.test_sighting import profile_with_a_robot_at
+    from tests.conftest import profile_with_a_robot_at
 
     frames, main, truth, _, _ = _handed_over(np.array([4.0, -3.0, 2.1]))
     for k in range(30):
@@ -460,15 +460,15 @@ def test_a_right_frame_is_held_against_maps_not_in_doubt_not_a_wrong_one_before_
     from agents.anchoring import Anchoring
     from agents.audits import UNDO_CONFLICT_SHARE, Audit
     from agents.coordinator import Coordinator, RobotInfo
-    from tests.test_mapmatch import _seen
+    from tests.conftest import seen_map
 
     truth = np.array([4.0, -3.0, 2.1])
     wrong = compose(truth, np.array([3.0, 0.0, 0.0]))
     cfg = Config()
     main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
-    main.on_robot_map("r1", _seen(box(-1, -8, 16, 9)))
+    main.on_robot_map("r1", seen_map(box(-1, -8, 16, 9)))
     frames = Anchoring(cfg, ["r2", "r3"])
-    east = _seen(box(8, -8, 25, 9), truth)  # in the robots' own frames
+    east = seen_map(box(8, -8, 25, 9), truth)  # in the robots' own frames
     for rid, frame, since_s in (("r2", wrong, 1.0), ("r3", truth, 2.0)):
         del frames.waiting[rid]
         main.robots[rid] = RobotInfo(rid, frame)
@@ -492,13 +492,13 @@ def test_a_restarted_coordinator_leaves_a_robot_whose_frame_was_withdrawn_waitin
     from agents.anchoring import Anchoring
     from agents.coordinator import Coordinator
     from protocols.messages import Pose
-    from tests.test_mapmatch import _seen
+    from tests.conftest import seen_map
 
     cfg = Config()
     main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
     frames = Anchoring(cfg, ["r2", "r3"])
     for rid in ("r2", "r3"):
-        frames.owner(rid, main).on_robot_map(rid, _seen(box(8, -8, 25, 9)))
+        frames.owner(rid, main).on_robot_map(rid, seen_map(box(8, -8, 25, 9)))
     assert not frames.on_pose("r2", 2, 0, main, own=True)
     assert "r2" in frames.waiting and frames.waiting["r2"].frame == 2
     frames.sighted("r2", 1.0, Pose(1.0, 2.0, 0.0, frame=2, own=True))
@@ -553,18 +553,17 @@ def test_two_waiting_robots_whose_maps_match_form_a_team_placed_as_one():
     from agents.anchoring import Anchoring
     from agents.coordinator import Coordinator
     from protocols.messages import Pose
-    from tests.test_mapmatch import _seen
-    from tests.test_sighting import profile_with_a_robot_at
+    from tests.conftest import profile_with_a_robot_at, seen_map
 
     truth2, truth3 = np.array([6.0, 1.0, 0.4]), np.array([12.0, 1.0, 2.1])  # building frame
     rel = compose(inverse(truth2), truth3)  # r3's frame in r2's
     cfg = Config()
     main = Coordinator(cfg, {"r1": (0.0, 0.0, 0.0)})
-    main.on_robot_map("r1", _seen(box(-1, -8, 1, 2)))  # 2 m2: no match with it yet
+    main.on_robot_map("r1", seen_map(box(-1, -8, 1, 2)))  # 2 m2: no match with it yet
     main.flush()
     frames = Anchoring(cfg, ["r2", "r3"])
     s2, s3 = frames.owner("r2", main), frames.owner("r3", main)
-    b2, b3 = _seen(box(3, -8, 16, 9), truth2), _seen(box(8, -8, 21, 9), truth3)
+    b2, b3 = seen_map(box(3, -8, 16, 9), truth2), seen_map(box(8, -8, 21, 9), truth3)
     for rid, solo, b in (("r2", s2, b2), ("r3", s3, b3)):
         solo.on_robot_map(rid, b)
         solo.on_pose(rid, 0.0, Pose(0.0, 0.0, 0.0))

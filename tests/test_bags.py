@@ -107,7 +107,7 @@ def test_the_shared_turtlebot3_bag_maps_sharper_than_its_odometry(shared_data, t
 
 
 def test_agent_replays_a_bag_over_zenoh_and_refuses_nothing(bags, tmp_path):
-    from tests.test_ros_agent import free_endpoint
+    from tests.conftest import free_endpoint
 
     out = tmp_path / "agent.polymap"
     args = ["agent", "--id", "r1", "--replay", str(bags["mcap"]), "--rate", "0"]

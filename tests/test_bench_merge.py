@@ -8,8 +8,7 @@ from shapely.geometry import box
 from polyswarm.benchmarks.merge import _pair_moments
 from polyswarm.frames.sighting import Sighting, Track
 from polyswarm.se2 import inverse, transform_points
-from tests.test_mapmatch import _seen
-from tests.test_sighting import profile_with_a_robot_at
+from tests.conftest import profile_with_a_robot_at, seen_map
 
 TRUTH = np.array([4.0, -3.0, 2.1])  # robot 2's frame in robot 1's
 
@@ -28,8 +27,8 @@ def _tracks(seen: bool) -> list[Track]:
 
 
 def _rows(seen: bool) -> list[dict]:
-    a = _seen(box(-1, -8, 16, 9))  # robot 1's map
-    b = _seen(box(8, -8, 25, 9), TRUTH)  # robot 2's, in its own frame
+    a = seen_map(box(-1, -8, 16, 9))  # robot 1's map
+    b = seen_map(box(8, -8, 25, 9), TRUTH)  # robot 2's, in its own frame
     moments = [(10.0, [a, b]), (15.0, [a, b]), (20.0, [a, b])]
     return _pair_moments(moments, 1, TRUTH, _tracks(seen))
 

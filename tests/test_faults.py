@@ -12,6 +12,8 @@ import sys
 
 import pytest
 
+from tests.conftest import assert_nothing_lost, kill_by_pid
+
 
 def launch(tmp_path, *extra: str, returncode: int = 0) -> tuple[dict, object]:
     out = tmp_path / "run"
@@ -33,19 +35,6 @@ def log_text(out, name: str) -> str:
     return " ".join((out / "logs" / f"{name}.log").read_text().split())
 
 
-def assert_nothing_lost(out) -> None:
-    """The coordinator's merged map holds everything it received from each robot, and
-    each robot still holds everything it sent (deltas in flight at shutdown are in the
-    robot's own persisted map)."""
-    from polyswarm.benchmarks.faults import lost_space
-
-    lost = lost_space(out)
-    assert set(lost) == {"r1", "r2"}
-    for r, v in lost.items():
-        assert v["missing_m2"] <= 1e-3 * v["shared_m2"], f"{v} of {r} not in the merge"
-        assert v["dropped_m2"] <= 1e-3 * v["shared_m2"], f"{r} lost what it had sent: {v}"
-
-
 def test_agent_killed_and_restarted_resumes_its_map(tmp_path):
     m, out = launch(tmp_path, "--fault", "kill:r2@3,restart:r2@6")
     assert completed(m) and m["crashed_processes"] == []
@@ -62,18 +51,6 @@ PERSISTED = {
     "coordinator": "coordinator-merged.polymap",
     "sim": "sim.json",
 }
-
-
-def kill_by_pid(out, name: str) -> int:
-    """SIGKILL process ``name`` of the launch writing to ``out`` by its process id
-    (``logs/pids.json``), as the kernel's out-of-memory killer would: not through
-    launch's fault injection. Returns the id."""
-    import os
-    import signal
-
-    pid = json.loads((out / "logs" / "pids.json").read_text())[name]
-    os.kill(pid, signal.SIGKILL)
-    return pid
 
 
 def _kill_from_outside(out, name: str, after_s: float, seen: dict) -> None:

@@ -6,26 +6,8 @@ import numpy as np
 import pytest
 
 from polyswarm.config import IcpConfig
-from polyswarm.raycast import cast_rays
 from polyswarm.slam.icp import PointToVectorIcp, VectorIndex, cull_backfaces
-
-ANGLES = np.linspace(-2.35, 2.35, 720)
-
-
-def room():
-    # a 6 m x 4 m room (counter-clockwise: free inside) with a pillar (clockwise)
-    outer = np.array([[0, 0], [6, 0], [6, 4], [0, 4]], float)
-    pillar = np.array([[2, 2.5], [2, 3], [2.5, 3], [2.5, 2.5]], float)
-    s = np.vstack([outer, pillar])
-    e = np.vstack([np.roll(outer, -1, 0), np.roll(pillar, -1, 0)])
-    return s, e
-
-
-def scan_at(pose, s, e, sigma=0.01, seed=0):
-    r = cast_rays(pose[:2], ANGLES + pose[2], s, e, 30.0)
-    r = r + np.random.default_rng(seed).normal(0, sigma, len(r))
-    ok = np.isfinite(r)
-    return np.stack([r[ok] * np.cos(ANGLES[ok]), r[ok] * np.sin(ANGLES[ok])], 1)
+from tests.conftest import room, scan_at
 
 
 @pytest.mark.parametrize("offset", [(0.2, -0.1, 0.05), (-0.3, 0.2, 0.15), (0.4, 0.3, -0.2)])

@@ -13,56 +13,13 @@ from shapely.geometry import box
 
 from polyswarm.frames.estimate import MIN_SEEN, FrameEstimate
 from polyswarm.frames.mapmatch import MapMatch, fit_at, frame_error, match_maps, transform_map
-from polyswarm.polymap import GridPolyMap, Ring, TypedPolygon, VectorType
+from polyswarm.polymap import GridPolyMap
 from polyswarm.se2 import inverse
-
-CELL_M = 2.0
-
-
-def _building() -> shapely.Geometry:
-    """A corridor with rooms of different sizes off it, a pillar in one: no symmetry."""
-    parts = [
-        box(0, 0, 24, 2),  # corridor
-        box(1, 2, 5, 7),
-        box(6, 2, 9, 5),
-        box(11, 2, 17, 8),
-        box(19, 2, 23, 4),
-        box(2, -6, 8, 0),
-        box(13, -3, 15, 0),
-        box(17, -7, 23, 0),
-    ]
-    doors_closed = shapely.union_all(parts)
-    return shapely.difference(doors_closed, box(19, -5, 20, -4))  # the pillar
-
-
-def _typed(region: shapely.Geometry, walls: shapely.Geometry) -> list[TypedPolygon]:
-    """Typed polygons of ``region``: edges on ``walls`` are obstacles, others frontiers."""
-    out = []
-    polys = [g for g in getattr(region, "geoms", [region]) if g.geom_type == "Polygon"]
-    for piece in polys:
-        p = shapely.geometry.polygon.orient(piece, 1.0)  # shell ccw, holes clockwise
-        rings = []
-        for ring in [p.exterior, *p.interiors]:
-            xy = np.asarray(ring.coords)[:-1]
-            mids = 0.5 * (xy + np.roll(xy, -1, axis=0))
-            on_wall = shapely.distance(walls, shapely.points(mids)) < 1e-6
-            types = np.where(on_wall, VectorType.OBSTACLE, VectorType.FRONTIER)
-            rings.append(Ring(xy, types))
-        out.append(TypedPolygon(rings[0], tuple(rings[1:])))
-    return out
-
-
-def _seen(window: shapely.Geometry, pose=(0.0, 0.0, 0.0)) -> GridPolyMap:
-    """The part of the building inside ``window``, as a robot whose frame is ``pose`` (in
-    the building's frame) would have mapped it."""
-    b = _building()
-    part = shapely.intersection(b, window)
-    m = GridPolyMap.from_polygons(_typed(part, b.boundary), CELL_M)
-    return transform_map(m, inverse(np.asarray(pose, dtype=float)))
+from tests.conftest import CELL_M, building, seen_map, typed_regions
 
 
 def test_transform_map_moves_the_explored_space_and_keeps_its_area():
-    m = _seen(box(-10, -10, 30, 10))
+    m = seen_map(box(-10, -10, 30, 10))
     pose = np.array([3.0, -2.0, 0.7])
     moved = transform_map(m, pose)
     assert moved.explored_area() == pytest.approx(m.explored_area(), rel=1e-6)
@@ -74,8 +31,8 @@ def test_transform_map_moves_the_explored_space_and_keeps_its_area():
     "pose", [(4.0, -3.0, 2.1), (-7.5, 12.0, -0.4), (0.3, 0.2, math.pi)], ids=str
 )
 def test_a_moved_part_of_the_building_is_found_where_it_is(pose):
-    a = _seen(box(-1, -8, 16, 9))  # the west two thirds
-    b = _seen(box(8, -8, 25, 9), pose)  # the east two thirds, in a frame at ``pose``
+    a = seen_map(box(-1, -8, 16, 9))  # the west two thirds
+    b = seen_map(box(8, -8, 25, 9), pose)  # the east two thirds, in a frame at ``pose``
     m = match_maps(a, b)
     assert m.accepted, m.summary()
     err_m, err_rad = frame_error(m.pose, pose)
@@ -89,7 +46,7 @@ def test_clear_space_is_what_lies_deeper_than_clear_m_inside_the_explored_space(
     from polyswarm.frames.mapmatch import CLEAR_M, RESOLUTION_M, _view
 
     room = shapely.affinity.rotate(box(0, 0, 4, 3), 30, origin=(0, 0))
-    v = _view(GridPolyMap.from_polygons(_typed(room, room.boundary), CELL_M))
+    v = _view(GridPolyMap.from_polygons(typed_regions(room, room.boundary), CELL_M))
     ij = np.indices(v.deep.shape).reshape(2, -1).T
     centres = shapely.points((ij + 0.5) * RESOLUTION_M + v.lo)
     depth = np.where(shapely.contains(room, centres), shapely.distance(room.boundary, centres), 0)
@@ -107,11 +64,11 @@ def test_walls_seen_on_the_other_robot_where_it_went_are_no_conflict():
     seen_at = np.linspace(9.2, 14.8, 8)
     body = 0.2  # the robot's radius, m; its outline in vectors about a lidar step long
     bodies = shapely.union_all([shapely.Point(x, 1.0).buffer(body, quad_segs=2) for x in seen_at])
-    building = _building()
-    part = shapely.difference(shapely.intersection(building, box(8, -8, 25, 9)), bodies)
-    walls = shapely.union(building.boundary, bodies.boundary)
-    b = transform_map(GridPolyMap.from_polygons(_typed(part, walls), CELL_M), inverse(pose))
-    a = _seen(box(-1, -8, 16, 9))
+    house = building()
+    part = shapely.difference(shapely.intersection(house, box(8, -8, 25, 9)), bodies)
+    walls = shapely.union(house.boundary, bodies.boundary)
+    b = transform_map(GridPolyMap.from_polygons(typed_regions(part, walls), CELL_M), inverse(pose))
+    a = seen_map(box(-1, -8, 16, 9))
     at_truth = fit_at([a], b, pose)[0]["conflict_share"]
     assert at_truth > 0.1  # the bodies' outlines, in A's clear corridor
     assert fit_at([a], b, pose, paths=[path])[0]["conflict_share"] < 0.01
@@ -121,7 +78,7 @@ def test_walls_seen_on_the_other_robot_where_it_went_are_no_conflict():
     # a wall across the corridor where A went is the building's: it reaches out of the band
     across = shapely.difference(part, box(12.9, -0.5, 13.1, 2.5))
     walls_across = shapely.union(walls, box(12.9, -0.5, 13.1, 2.5).boundary)
-    typed = _typed(across, walls_across)
+    typed = typed_regions(across, walls_across)
     b_across = transform_map(GridPolyMap.from_polygons(typed, CELL_M), inverse(pose))
     assert fit_at([a], b_across, pose, paths=[path])[0]["conflict_share"] > 0.01
     assert not match_maps(a, b).accepted
@@ -132,8 +89,8 @@ def test_walls_seen_on_the_other_robot_where_it_went_are_no_conflict():
 
 
 def test_maps_that_share_no_space_are_not_merged():
-    a = _seen(box(-1, -8, 10, 9))
-    b = _seen(box(12, -8, 25, 9), (2.0, 1.0, 0.5))
+    a = seen_map(box(-1, -8, 10, 9))
+    b = seen_map(box(12, -8, 25, 9), (2.0, 1.0, 0.5))
     m = match_maps(a, b)
     assert not m.accepted
     assert m.reason
@@ -141,7 +98,7 @@ def test_maps_that_share_no_space_are_not_merged():
 
 def test_a_square_room_fits_four_ways_and_is_not_merged():
     room = box(0, 0, 6, 6)
-    a = GridPolyMap.from_polygons(_typed(room, room.boundary), CELL_M)
+    a = GridPolyMap.from_polygons(typed_regions(room, room.boundary), CELL_M)
     b = transform_map(a, (1.0, 2.0, 0.3))
     m = match_maps(a, b)
     assert not m.accepted
@@ -152,9 +109,11 @@ def test_identical_rooms_in_a_row_are_ambiguous():
     """Five identical rooms off a corridor; B saw two of them: any two fit."""
     rooms = [box(5 * k, 2, 5 * k + 4, 7) for k in range(5)]
     b_all = shapely.union_all([box(0, 0, 24, 2), *rooms])
-    a = GridPolyMap.from_polygons(_typed(b_all, b_all.boundary), CELL_M)
+    a = GridPolyMap.from_polygons(typed_regions(b_all, b_all.boundary), CELL_M)
     part = shapely.intersection(b_all, box(4.5, -1, 14.5, 8))
-    b = transform_map(GridPolyMap.from_polygons(_typed(part, b_all.boundary), CELL_M), (0, 0, 1.0))
+    b = transform_map(
+        GridPolyMap.from_polygons(typed_regions(part, b_all.boundary), CELL_M), (0, 0, 1.0)
+    )
     m = match_maps(a, b)
     assert not m.accepted
     assert "ambiguous" in m.reason, m.summary()
@@ -259,7 +218,7 @@ def test_the_peer_methods_grid_merging_finds_a_whole_moved_building(features):
 
     pose = (2.0, 1.0, 0.3)
     everything = box(-10, -10, 30, 10)
-    g = match_grids(_seen(everything), _seen(everything, pose), Features(features))
+    g = match_grids(seen_map(everything), seen_map(everything, pose), Features(features))
     assert g.confidence >= DEFAULT_THRESHOLD
     err_m, err_rad = frame_error(g.pose, pose)
     assert err_m < 0.2 and err_rad < math.radians(1.0)
@@ -271,8 +230,8 @@ def test_parts_of_a_symmetric_ring_corridor_are_not_merged():
     ring = shapely.difference(box(0, 0, 20, 20), box(2, 2, 18, 18))
     a_part = shapely.intersection(ring, box(-1, -1, 21, 11))  # the south half
     b_part = shapely.intersection(ring, box(-1, 5, 11, 21))  # the north-west half
-    a = GridPolyMap.from_polygons(_typed(a_part, ring.boundary), CELL_M)
-    b = GridPolyMap.from_polygons(_typed(b_part, ring.boundary), CELL_M)
+    a = GridPolyMap.from_polygons(typed_regions(a_part, ring.boundary), CELL_M)
+    b = GridPolyMap.from_polygons(typed_regions(b_part, ring.boundary), CELL_M)
     m = match_maps(a, transform_map(b, (3.0, 1.0, 0.7)))
     assert not m.accepted
     assert "ambiguous" in m.reason, m.summary()

@@ -17,7 +17,7 @@ from polyswarm.config import Config
 from polyswarm.explore.targets import map_facts
 from polyswarm.nav.navgraph import NavGraph
 from protocols.messages import Pose
-from tests.test_replay import RECTS, ops_of, same, shifted
+from tests.conftest import RECTS, ops_of, same, shifted
 
 
 def coordinators(robots: int = 3) -> tuple[Coordinator, Coordinator, MergeProcess]:

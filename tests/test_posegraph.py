@@ -17,8 +17,7 @@ from polyswarm.slam.loopsearch import correlative_search
 from polyswarm.slam.polyslam import PolySlam
 from polyswarm.slam.posegraph import PoseGraph
 from polyswarm.slam.submap import KeyframeStore
-from tests.conftest import O, rect
-from tests.test_icp import room, scan_at
+from tests.conftest import O, rect, room, scan_at
 
 
 def square_loop(heading_bias: float) -> tuple[PoseGraph, np.ndarray]:

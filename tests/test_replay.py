@@ -14,43 +14,11 @@ from agents.coordinator import Coordinator
 from agents.replay import ReplayPool, apply_update
 from polyswarm.config import Config
 from polyswarm.errors import DeltaGapError, MapError
-from polyswarm.polymap import GridPolyMap, MergeOp, MergeOptions, cells_digest
 from polyswarm.slam.follow import Atlas
 from protocols.messages import Pose
-from tests.conftest import F, O, rect
+from tests.conftest import RECTS, ops_of, rect, same, shifted
 
-OPTS = MergeOptions(0.05, 0.05, 0.01, 0.1, 0.08)
-# keyframe polygons of a robot driving along a corridor and into side rooms
-RECTS = [
-    (-0.5, -0.5, 3.3, 0.7, (O, F, O, F)),
-    (3.0, -0.5, 5.1, 0.7, (O, F, O, O)),
-    (4.2, 0.6, 4.9, 2.5, (O, O, O, F)),
-    (-0.4, 0.6, 0.4, 2.5, (O, O, F, O)),
-    (4.0, 2.4, 7.5, 4.1, (O, F, O, F)),
-]
 POLYS = [rect(*r) for r in RECTS]
-
-
-def shifted(r, dy: float):
-    x0, y0, x1, y1, types = r
-    return rect(x0, y0 + dy, x1, y1 + dy, types)
-
-
-def ops_of(polys) -> tuple[GridPolyMap, list[MergeOp]]:
-    """A robot's map after merging ``polys``, and the merges it sent."""
-    pmap, ops = GridPolyMap(2.0), []
-    for poly in polys:
-        res = pmap.merge(poly, OPTS)
-        digest = cells_digest(res.map.cells[i] for i in res.changed)
-        ops.append(MergeOp(2.0, pmap.version, res.map.version, poly, OPTS, digest))
-        pmap = res.map
-    return pmap, ops
-
-
-def same(a: GridPolyMap, b: GridPolyMap) -> bool:
-    return a.version == b.version and cells_digest(a.cells.values()) == cells_digest(
-        b.cells.values()
-    )
 
 
 def settle(c: Coordinator, timeout_s: float = 30.0) -> list:

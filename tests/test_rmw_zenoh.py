@@ -23,7 +23,7 @@ from protocols import rmw_zenoh as rz
 from protocols import ros
 from protocols.bags import read_bag
 from protocols.messages import ProtocolError
-from tests.test_ros_agent import free_endpoint
+from tests.conftest import free_endpoint
 
 STRING = "std_msgs/msg/String"
 CHATTER_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"

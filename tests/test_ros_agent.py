@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import socket
 import threading
 import time
 
@@ -21,12 +20,7 @@ from polyswarm.slam.scan import LaserScan
 from protocols import ros
 from protocols.keys import SwarmKeys
 from protocols.messages import ProtocolError
-
-
-def free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+from tests.conftest import free_endpoint
 
 
 def test_cdr_round_trips_and_malformed_cdr_is_a_protocol_error():

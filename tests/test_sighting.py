@@ -30,7 +30,7 @@ from polyswarm.frames.sighting import (
 )
 from polyswarm.polymap import GridPolyMap
 from polyswarm.se2 import compose, inverse, transform_points
-from tests.test_mapmatch import CELL_M, _typed
+from tests.conftest import CELL_M, profile_with_a_robot_at, typed_regions
 
 ROBOT_RADIUS_M = 0.2
 
@@ -97,7 +97,7 @@ RING = shapely.difference(box(0, 0, 20, 20), box(2, 2, 18, 18))
 def _corridor_map() -> GridPolyMap:
     """A 2 m wide corridor, 30 m long, along x from (0, 0); its walls at y = +-1 m."""
     hall = box(-0.5, -1.0, 30.0, 1.0)
-    return GridPolyMap.from_polygons(_typed(hall, hall.boundary), CELL_M)
+    return GridPolyMap.from_polygons(typed_regions(hall, hall.boundary), CELL_M)
 
 
 def test_a_room_is_the_explored_space_a_robots_centre_fits_in():
@@ -139,17 +139,6 @@ def test_along_a_corridor_only_where_a_robot_can_stand_is_looked_at():
     assert WALL_CLEAR_M < 1.0  # the corridor's middle is farther than that from its walls
 
 
-def profile_with_a_robot_at(xy, clear_m: float = 10.0) -> bytes:
-    """A clear profile: clear to ``clear_m`` all around, and a robot's body at ``xy``
-    (metres, the viewer's frame)."""
-    from polyswarm.frames.sighting import BODY_M, _sector
-
-    out = [int(clear_m / CLEAR_UNIT_M)] * SECTORS
-    d = float(np.hypot(*xy)) - BODY_M / 2
-    out[int(_sector(np.arctan2(xy[1], xy[0])))] = int(d / CLEAR_UNIT_M)
-    return bytes(out)
-
-
 def test_a_robot_whose_body_the_viewer_mapped_is_not_contradicted_where_it_stood():
     """The viewer at (0, 0) watched the other robot stand 10 m down the corridor: a return
     9.8 m out in one sector, and its map holds the body (a wall) with its shadow behind,
@@ -175,7 +164,9 @@ def test_a_robot_whose_body_the_viewer_mapped_is_not_contradicted_where_it_stood
         [(9.8, 0.0), (30.0, 0.0), (30.0, 30.0 * math.tan(step)), (9.8, 9.8 * math.tan(step))]
     )
     walls = shapely.union(hall.boundary, shapely.LineString([(9.8, 0.0), (9.8, 0.5)]))
-    mapped = GridPolyMap.from_polygons(_typed(shapely.difference(hall, shadow), walls), CELL_M)
+    mapped = GridPolyMap.from_polygons(
+        typed_regions(shapely.difference(hall, shadow), walls), CELL_M
+    )
     truth = np.array([10.0 * math.cos(step / 2), 10.0 * math.sin(step / 2), 0.0])
     own = transform_map(_corridor_map(), inverse(truth))  # the other's map, its own frame
     assert unseen(viewer, other, truth, Room(mapped)) == 6  # beside its body: contradicted
@@ -191,7 +182,7 @@ def test_sightings_count_in_places_not_moments():
     about that place no better than seen once; seen in three places 1.5 m apart, no
     quarter turn about any point explains them all."""
     room = box(-1, -8, 16, 9)
-    hall = GridPolyMap.from_polygons(_typed(room, room.boundary), CELL_M)
+    hall = GridPolyMap.from_polygons(typed_regions(room, room.boundary), CELL_M)
     a, still, moving = Track(), Track(), Track()
     for k in range(6):
         there = (5.0, 1.5 * (k // 2))  # two moments in each of three places
@@ -225,7 +216,7 @@ def test_a_wall_return_far_away_is_no_sighting_a_robot_clear_of_walls_is():
     former test of the centre alone (a wrong frame was committed so); the sector's arc
     reaches the wall. A robot in the middle of the hall at 12 and 25 m is still seen."""
     hall_box = box(-1, -3, 40, 3)
-    hall = GridPolyMap.from_polygons(_typed(hall_box, hall_box.boundary), CELL_M)
+    hall = GridPolyMap.from_polygons(typed_regions(hall_box, hall_box.boundary), CELL_M)
     former = {"max_range_m": math.inf, "arc": False}
     fooled = 0
     for x_m in np.arange(28.0, 32.0, 0.05):  # returns on the wall y = 3 m, far away
@@ -279,10 +270,10 @@ def test_a_symmetric_ring_is_merged_at_its_true_frame_once_sightings_rule_out_th
     each sends clear profiles. Every rotated image puts B where A looked (or A where B
     looked) and saw nothing; the truth does not."""
     a_map = GridPolyMap.from_polygons(
-        _typed(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
+        typed_regions(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
     )
     b_world = GridPolyMap.from_polygons(
-        _typed(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
+        typed_regions(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
     )
     to_b = np.array([3.0, 1.0, 0.7])  # B's frame: the world moved by this
     truth = inverse(to_b)  # B's frame in A's (the world's)
@@ -315,10 +306,10 @@ def test_a_symmetric_ring_is_merged_at_its_true_frame_once_sightings_rule_out_th
 
 def test_a_pose_every_sighting_contradicts_is_never_accepted():
     a_map = GridPolyMap.from_polygons(
-        _typed(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
+        typed_regions(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
     )
     b_map = GridPolyMap.from_polygons(
-        _typed(shapely.intersection(RING, box(-1, 5, 11, 21)), RING.boundary), CELL_M
+        typed_regions(shapely.intersection(RING, box(-1, 5, 11, 21)), RING.boundary), CELL_M
     )
     plain = match_maps(a_map, b_map)
     silent = match_maps(a_map, b_map, lambda f: False)
@@ -333,10 +324,10 @@ def test_when_sightings_contradict_every_best_peak_the_next_peaks_are_refined():
     """The search's best PEAKS peaks all contradicted (here: poses put in front of the
     real ones): the next peaks are refined, and the true frame among them is found."""
     a_map = GridPolyMap.from_polygons(
-        _typed(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
+        typed_regions(shapely.intersection(RING, box(-1, -1, 21, 11)), RING.boundary), CELL_M
     )
     b_world = GridPolyMap.from_polygons(
-        _typed(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
+        typed_regions(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
     )
     to_b = np.array([3.0, 1.0, 0.7])
     truth = inverse(to_b)
@@ -361,9 +352,9 @@ def test_a_frame_is_refused_while_an_image_of_it_under_a_symmetry_of_a_map_is_po
     once every image is ruled out (here by sightings)."""
     from polyswarm.frames.mapmatch import _symmetric_images, _view
 
-    whole = GridPolyMap.from_polygons(_typed(RING, RING.boundary), CELL_M)
+    whole = GridPolyMap.from_polygons(typed_regions(RING, RING.boundary), CELL_M)
     part = GridPolyMap.from_polygons(
-        _typed(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
+        typed_regions(shapely.intersection(RING, box(-1, -1, 11, 21)), RING.boundary), CELL_M
     )
     to_b = np.array([3.0, 1.0, 0.7])
     truth = inverse(to_b)

@@ -41,7 +41,7 @@ def _kill_once_logged(out, name: str, line: str, seen: dict) -> None:
     """``kill_by_pid`` process ``name`` once its log holds ``line``."""
     import time
 
-    from tests.test_faults import kill_by_pid
+    from tests.conftest import kill_by_pid
 
     log = out / "logs" / f"{name}.log"
     deadline = time.monotonic() + 500
@@ -64,7 +64,7 @@ def test_a_coordinator_killed_before_and_after_a_robot_joins_places_it_once(tmp_
     run reaches 99 %, and nothing either robot shared is lost."""
     import threading
 
-    from tests.test_faults import assert_nothing_lost
+    from tests.conftest import assert_nothing_lost
 
     out, seen = tmp_path / "run", {}
     line = "robot r2 joins the swarm's map"
