@@ -297,3 +297,54 @@ def scan_at(pose, s, e, sigma=0.01, seed=0):
     r = r + np.random.default_rng(seed).normal(0, sigma, len(r))
     ok = np.isfinite(r)
     return np.stack([r[ok] * np.cos(ANGLES[ok]), r[ok] * np.sin(ANGLES[ok])], 1)
+
+
+# --- PolyMap checks ----------------------------------------------------------------------
+
+
+def total_length(pmap, kind) -> float:
+    """Length of the map's vectors of type ``kind``, metres."""
+    s, e, _ = pmap.vectors([kind])
+    return float(np.hypot(*(e - s).T).sum())
+
+
+def assert_well_formed(pmap) -> None:
+    """Every cell: valid polygons inside the cell, free space on the left of every vector."""
+    import shapely
+
+    from polyswarm.polymap import PRECISION_M
+
+    for cell in pmap.cells.values():
+        assert cell.region.is_valid
+        x0, y0, x1, y1 = cell.bounds
+        bx = cell.region.bounds
+        assert (
+            bx[0] >= x0 - 1e-9 and bx[1] >= y0 - 1e-9 and bx[2] <= x1 + 1e-9 and bx[3] <= y1 + 1e-9
+        )
+        for poly in cell.polygons:
+            assert poly.shell.signed_area > 0
+            assert all(h.signed_area < 0 for h in poly.holes)
+            for ring in poly.rings():
+                # vertices on the 1 mm grid
+                assert np.allclose(ring.xy, np.rint(ring.xy / PRECISION_M) * PRECISION_M, atol=1e-9)
+                # a point just left of each vector's midpoint is explored
+                a, b = ring.segments()
+                d = b - a
+                L = np.hypot(d[:, 0], d[:, 1])
+                left = 0.5 * (a + b) + 1e-7 * np.stack([-d[:, 1], d[:, 0]], axis=1) / L[:, None]
+                assert shapely.intersects_xy(cell.region, left[:, 0], left[:, 1]).all()
+
+
+# --- robots in frames of their own (anchoring) ---------------------------------------------
+
+
+def anchoring_ticks(frames, main, now: float, until, wall_s: float = 120.0) -> tuple[list, float]:
+    """``frames.tick`` once a simulated second until ``until()``; what it sent, and now."""
+    import time
+
+    sent, give_up = [], time.monotonic() + wall_s
+    while not until() and time.monotonic() < give_up:
+        sent += frames.tick(main, now)
+        now += 1.0
+        time.sleep(0.02)
+    return sent, now
