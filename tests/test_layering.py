@@ -119,3 +119,41 @@ def test_the_core_has_no_import_cycles():
 
     for node in graph:
         visit(node, [])
+
+
+SIZED = ("polyswarm", "agents", "protocols", "sim", "tests", "examples")
+MAX_MODULE_LINES = 600  # a module a newcomer reads in one sitting
+MAX_FUNCTION_LINES = 80  # a function that does one thing fits on a screen or two
+
+
+def _sources():
+    for package in SIZED:
+        yield from sorted((ROOT / package).rglob("*.py"))
+
+
+def test_no_module_is_over_600_lines_and_no_function_over_80():
+    long_modules = [
+        f"{p.relative_to(ROOT)}: {n}"
+        for p in _sources()
+        if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES
+    ]
+    long_functions = [
+        f"{p.relative_to(ROOT)}:{node.lineno} {node.name}: {node.end_lineno - node.lineno + 1}"
+        for p in _sources()
+        for node in ast.walk(ast.parse(p.read_text()))
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES
+    ]
+    assert not long_modules, long_modules
+    assert not long_functions, long_functions
+
+
+def test_no_test_module_imports_another():
+    """Helpers shared by tests live in conftest.py."""
+    bad = [
+        f"{p.name}: {name}"
+        for p in sorted((ROOT / "tests").glob("*.py"))
+        for name in imports(p)
+        if name.startswith("tests.test_")
+    ]
+    assert not bad, bad
