@@ -46,7 +46,10 @@ def bench_fleet(
         rows = [
             (
                 f"{r['world']} seed {r['seed']}: coverage, t99, keyframes while cut",
-                f"{100 * r['final_coverage']:.1f} %, {r['t99_s']} s, {r['keyframes_while_cut']}",
+                f"{100 * r['final_coverage']:.1f} %, "
+                + ("never" if r["t99_s"] is None else f"{r['t99_s']:.0f} s")
+                + ", "
+                + ", ".join(f"{k} {n}" for k, n in r["keyframes_while_cut"].items()),
             )
             for r in res["runs"]
         ]
