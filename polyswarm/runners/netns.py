@@ -35,7 +35,8 @@ from polyswarm.errors import PolyswarmError
 log = logging.getLogger(__name__)
 
 PREFIX = "ps-"  # every namespace polyswarm makes starts with this
-SUBNET = "10.77.0"  # the radio's /24: private, and only ever inside our own namespaces
+SUBNETS = "10.77"  # the radios' /24s (10.77.k.0): private; one per network on this machine
+LAUNCH_HOST = 254  # the launch's own router on the radio (the observer's base station)
 PORT = 7447  # each host's router, on its wifi0 address
 IP_TIMEOUT_S = 10.0
 OWNERS = Path("/run/polyswarm")  # which process made each run's network (a pid file a run)
@@ -108,11 +109,23 @@ def namespaces() -> list[str]:
     return [line.split()[0] for line in out.splitlines() if line.startswith(PREFIX)]
 
 
+def _free_subnet() -> str:
+    """A radio /24 no address of this machine's own namespace lies in (another network's
+    bridge holds one)."""
+    used = _ip("-o", "-4", "addr", "show").stdout
+    for k in range(250):
+        subnet = f"{SUBNETS}.{k}"
+        if f" {subnet}." not in used:
+            return subnet
+    raise NetworkError(f"every radio subnet {SUBNETS}.0-249 is in use")
+
+
 @dataclass
 class FleetNetwork:
     run: str  # a short id: names are ps-<run>-<host>
-    hosts: list[str]  # in the order their addresses are given (10.77.0.1, ...)
+    hosts: list[str]  # in the order their addresses are given (10.77.k.1, ...)
     sockets_dir: Path  # where the hosts' Unix sockets are
+    subnet: str = f"{SUBNETS}.0"  # the radio's /24 (its first three numbers)
     made: bool = False
 
     @classmethod
@@ -123,7 +136,7 @@ class FleetNetwork:
         if len(hosts) > 250:
             raise NetworkError(f"{len(hosts)} hosts: the radio's /24 holds 250")
         sweep_stale()
-        net = cls(run, list(hosts), Path(sockets_dir))
+        net = cls(run, list(hosts), Path(sockets_dir), _free_subnet())
         net.sockets_dir.mkdir(parents=True, exist_ok=True)
         try:
             OWNERS.mkdir(parents=True, exist_ok=True)
@@ -142,7 +155,11 @@ class FleetNetwork:
         return f"{PREFIX}{self.run}-{host}"
 
     def address(self, host: str) -> str:
-        return f"{SUBNET}.{self.hosts.index(host) + 1}"
+        return f"{self.subnet}.{self.hosts.index(host) + 1}"
+
+    def launch_endpoint(self) -> str:
+        """The launch's router on the radio: a host's cut also cuts the observer off it."""
+        return f"tcp/{self.subnet}.{LAUNCH_HOST}:{PORT}"
 
     def _peer(self, host: str) -> str:
         return f"ps{self.run}{self.hosts.index(host)}"[:15]  # the bridge's end of wifi0
@@ -150,6 +167,7 @@ class FleetNetwork:
     def _build(self) -> None:
         self.made = True
         _ip("link", "add", "name", self.bridge, "type", "bridge")
+        _ip("addr", "add", f"{self.subnet}.{LAUNCH_HOST}/24", "dev", self.bridge)
         _ip("link", "set", self.bridge, "up")
         for host in self.hosts:
             ns, peer = self.namespace(host), self._peer(host)
@@ -211,9 +229,10 @@ class FleetNetwork:
 @dataclass(frozen=True)
 class Hosts:
     """Where each process of a launch runs and how it reaches Zenoh: with a network
-    (``--netns``) each host's process is a router of the mesh, the coordinator's also
-    linked to the launch's own router (the observer's), the simulator to each robot over
-    its Unix socket; without one, everyone is a client of the launch's router."""
+    (``--netns``) each host's process is a router of the mesh, the coordinators' also
+    linked to the launch's own router (the observer's) over the radio, so a cut host is
+    cut off from it too; the simulator reaches each robot over its Unix socket; without
+    a network, everyone is a client of the launch's router."""
 
     net: FleetNetwork | None
     endpoint: str  # the launch's router, for the observer, the view and the simulator
@@ -223,7 +242,7 @@ class Hosts:
         """Where the launch's router listens."""
         if self.net is None:
             return self.endpoint
-        return f"{self.endpoint},{self.net.unix_endpoint('launch')}"
+        return f"{self.endpoint},{self.net.launch_endpoint()}"
 
     def wrap(self, host: str) -> list[str]:
         return [] if self.net is None else self.net.wrap(host)
@@ -232,7 +251,7 @@ class Hosts:
         if self.net is None:
             return ["--connect", self.endpoint]
         listen = ",".join(self.net.listen(name))
-        mesh = [*self.net.mesh(name), self.net.unix_endpoint("launch")]
+        mesh = [*self.net.mesh(name), self.net.launch_endpoint()]
         return ["--listen", listen, "--connect", ",".join(mesh)]
 
     def agent_args(self, rid: str) -> list[str]:
