@@ -92,19 +92,25 @@ def test_cutting_a_link_without_netns_is_a_one_line_error(tmp_path):
     assert proc.stderr.strip().splitlines()[-1].startswith("error: fault")
 
 
+def _office_launch(tmp_path, faults: str, coordinators: int = 1) -> tuple[dict, object]:
+    """3 robots on the office with --netns and ``faults``; (metrics, run folder) of a
+    launch that exited 0."""
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "3", "--world", "office"]
+    cmd += ["--speed", "0", "--wall-limit", "400", "--netns", "--out", str(out)]
+    cmd += ["--coordinators", str(coordinators), "--fault", faults]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=500, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads((out / "metrics.json").read_text()), out
+
+
 def test_robots_cut_off_keep_mapping_and_their_maps_agree_with_the_coordinators_after(tmp_path):
     """Three robots on the office, each agent and the coordinator in a namespace of its
     own; r1 out of range from 30 to 90 simulated seconds, r2 from 50 to 110. Measured:
     100 % coverage at t99 134 s; exploring frontiers of their own maps while cut, r1
     made 65 and r2 59 keyframes (15 and 10 when they stood at their last target); every
     map the coordinator holds the same version as the robot's own at the end."""
-    out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "3", "--world", "office"]
-    cmd += ["--speed", "0", "--wall-limit", "400", "--netns", "--out", str(out)]
-    cmd += ["--fault", "cut:r1@30,restore:r1@90,cut:r2@50,restore:r2@110"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=500, check=False)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    m = json.loads((out / "metrics.json").read_text())
+    m, out = _office_launch(tmp_path, "cut:r1@30,restore:r1@90,cut:r2@50,restore:r2@110")
     run = json.loads((out / "logs" / "netns.json").read_text())["run"]
     assert _ours(run) == []  # namespaces, links and bridge gone
     assert m["final_coverage"] >= 0.99 and m["map_iou"] >= 0.95, m["final_coverage"]
@@ -120,13 +126,7 @@ def test_a_standby_takes_over_when_the_active_coordinators_host_is_lost(tmp_path
     """Two coordinators on hosts of their own; at 40 simulated seconds the active one's
     host is gone (its processes killed, its link down). Measured: coordinator2 took
     over 5.7 s later (wall), the robots followed it and the mission ended at 100 %."""
-    out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "3", "--world", "office"]
-    cmd += ["--speed", "0", "--wall-limit", "400", "--netns", "--coordinators", "2"]
-    cmd += ["--fault", "kill:coordinator@40,cut:coordinator@40", "--out", str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=500, check=False)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    m = json.loads((out / "metrics.json").read_text())
+    m, _ = _office_launch(tmp_path, "kill:coordinator@40,cut:coordinator@40", coordinators=2)
     assert m["mission_state"] == "done" and m["final_coverage"] >= 0.99, m["stopped_because"]
     assert [(t, n) for t, n, *_ in m["leaders"]] == [(0, "coordinator"), (1, "coordinator2")]
     assert len(m["takeover_s"]) == 1 and m["takeover_s"][0] <= 10.0, m["takeover_s"]
@@ -139,13 +139,7 @@ def test_an_active_coordinator_cut_off_stands_by_for_the_one_that_took_over(tmp_
     range, the first hears an active coordinator of a higher term and stands by; the
     robots follow coordinator2 throughout. Measured: taken over at 58 s, mission done at
     100 %, every map copy equal to its robot's."""
-    out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "polyswarm", "launch", "--robots", "3", "--world", "office"]
-    cmd += ["--speed", "0", "--wall-limit", "400", "--netns", "--coordinators", "2"]
-    cmd += ["--fault", "cut:coordinator@40,restore:coordinator@80", "--out", str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=500, check=False)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    m = json.loads((out / "metrics.json").read_text())
+    m, out = _office_launch(tmp_path, "cut:coordinator@40,restore:coordinator@80", 2)
     assert m["mission_state"] == "done" and m["final_coverage"] >= 0.99, m["stopped_because"]
     assert [(t, n) for t, n, *_ in m["leaders"]] == [(0, "coordinator"), (1, "coordinator2")]
     first = " ".join((out / "logs" / "coordinator.log").read_text().split())
