@@ -5,7 +5,9 @@ Two sources:
 * ROS map_server maps (``world_from_map_yaml``): occupied pixels become wall boxes,
   neighbouring pixels merged into as few boxes as possible (row runs, then identical
   runs stacked). Unknown pixels that touch the reachable free space are walled too,
-  so lidar beams cannot leak out through gaps in the mapped walls.
+  so lidar beams cannot leak out through gaps in the mapped walls, and so is the ring
+  just outside the image where free pixels reach its edge (Nav2's warehouse and depot
+  maps do): no robot drives off the map.
 * procedural worlds defined in code (``procedural_world``): loop, cross, zigzag, maze
   (seeded), office, curves, rooms and furnished (seeded clutter, `sim.furnished`), so
   the simulator works with nothing installed.
@@ -27,7 +29,7 @@ from shapely.geometry import Point
 from shapely.ops import nearest_points
 
 from polyswarm.errors import SimulationError
-from polyswarm.grids.occupancy import OccupancyGrid
+from polyswarm.grids.occupancy import UNKNOWN, OccupancyGrid
 from sim.furnished import furnished_world
 from sim.shapes import (
     World,
@@ -82,8 +84,9 @@ def default_start(free: shapely.Geometry, clearance: float = 0.5) -> tuple[float
 
 
 def world_from_grid(
-    grid: OccupancyGrid, name: str, start: tuple[float, float] | None = None
+    truth: OccupancyGrid, name: str, start: tuple[float, float] | None = None
 ) -> World:
+    grid = _ringed(truth)
     free_px = grid.free
     labels, n = ndimage.label(free_px)
     if n == 0:
@@ -109,7 +112,14 @@ def world_from_grid(
     free = _pixels_to_region(reach, grid)
     if start is None:
         start = default_start(free)
-    return World(name, walls, free, start, 0.0, boxes, grid)
+    return World(name, walls, free, start, 0.0, boxes, truth)
+
+
+def _ringed(grid: OccupancyGrid) -> OccupancyGrid:
+    """The grid inside a ring of unknown pixels, one pixel wide."""
+    res, (ox, oy) = grid.resolution, grid.origin
+    data = np.pad(grid.data, 1, constant_values=UNKNOWN)
+    return OccupancyGrid(data, res, (ox - res, oy - res))
 
 
 def _pixels_to_region(mask: np.ndarray, grid: OccupancyGrid) -> shapely.Geometry:

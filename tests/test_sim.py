@@ -243,15 +243,29 @@ def test_data_worlds_wall_boxes_cover_every_occupied_pixel_and_no_free_one(share
     grid = read_map(shared_data / "worlds" / f"{world}.yaml")
     w = load_world(shared_data / "worlds" / f"{world}.yaml")
     res, (ox, oy) = grid.resolution, grid.origin
-    cover = np.zeros(grid.shape, dtype=np.int32)
+    cover = np.zeros(np.add(grid.shape, 2), dtype=np.int32)  # with the ring around the image
     for x0, y0, x1, y1 in w.boxes:
-        c0, c1 = round((x0 - ox) / res), round((x1 - ox) / res)
-        r0, r1 = round((y0 - oy) / res), round((y1 - oy) / res)
+        c0, c1 = round((x0 - ox) / res) + 1, round((x1 - ox) / res) + 1
+        r0, r1 = round((y0 - oy) / res) + 1, round((y1 - oy) / res) + 1
         cover[r0:r1, c0:c1] += 1
+    cover = cover[1:-1, 1:-1]
     assert (cover[grid.occupied] >= 1).all()
     assert (cover[grid.free] == 0).all()
     assert (cover <= 1).all()  # boxes do not overlap
     assert len(w.boxes) < grid.occupied.sum() / 5  # neighbouring pixels merged
+
+
+@pytest.mark.parametrize("world", ["nav2-warehouse", "nav2-depot"])
+def test_a_map_whose_free_space_reaches_the_image_edge_is_closed_there(shared_data, world):
+    grid = read_map(shared_data / "worlds" / f"{world}.yaml")
+    w = load_world(shared_data / "worlds" / f"{world}.yaml")
+    assert grid.free[[0, -1]].any() or grid.free[:, [0, -1]].any()  # the case in point
+    around = shapely.box(*w.free.bounds).buffer(1.0)
+    open_space = shapely.difference(around, w.walls)
+    start = shapely.Point(w.start)
+    inside = next(p for p in getattr(open_space, "geoms", [open_space]) if p.intersects(start))
+    assert not inside.intersects(around.exterior)  # walled in: no way off the map
+    assert inside.area == pytest.approx(w.free.area, rel=0.01)
 
 
 def test_the_start_must_be_free():
