@@ -163,6 +163,7 @@ class AgentNode:
         if self.ros_node is not None:
             self.ros_node.publish_map(agent.planning_map, agent.target_xy)
             self.ros_node.publish_robots(agent.id, agent.pose, agent.path_left(), agent.peers)
+            self.ros_node.publish_map_to_odom(agent.pose, agent.slam.odom)
         if self.need_merged and agent.in_shared_frame:
             self._fetch_merged()
 

@@ -456,7 +456,7 @@ class RobotAgent(Peers):
         return (m.x_m, m.y_m, m.yaw_rad, m.upside_down)
 
     def use_tf_mount(self, found) -> None:
-        """The lidar's mount from the robot's /tf_static (``protocols.bags.Mount2D``, or
+        """The lidar's mount from the robot's tf (``protocols.tf.MountSources``, or
         None: nothing new), unless the config sets one; without either, said once after
         ``MOUNT_WAIT_SCANS`` scans."""
         from protocols.tf import TF, TF_STATIC, choose_mount

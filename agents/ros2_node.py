@@ -8,11 +8,13 @@ With rclpy installed (a ROS 2 installation, or ROS 2 Jazzy's packages from PyPI:
   turned into the agent's own messages on arrival, so its loop is that of every source;
 * out: ``map`` (nav_msgs/OccupancyGrid of the map the robot plans on: the merged map
   once the coordinator shares it; reliable and transient-local as map_server's; at
-  most once a second and only when the map changed) and ``polyswarm/frontiers``
-  (visualization_msgs/MarkerArray: the map's frontier vectors and the robot's target).
-
-The lidar's mount comes from ``[slam.mount]``: tf2_msgs (the type of ``/tf``) is not
-among the ROS 2 packages on PyPI.
+  most once a second and only when the map changed), ``polyswarm/frontiers`` and
+  ``polyswarm/robots`` (visualization_msgs/MarkerArray: the map's frontier vectors and
+  the robot's target; the robots, their headings and the path).
+* tf (``agents.ros2_tf``, a DDS participant of its own: tf2_msgs is not among the ROS 2
+  packages on PyPI): the lidar's mount from ``tf_static``, else ``tf``; out on ``tf``
+  the map frame -> the odometry's frame, so RViz and Nav2 see the robot in the map
+  polyswarm publishes.
 """
 
 from __future__ import annotations
@@ -38,6 +40,10 @@ FRONTIER_WIDTH_M = 0.05  # line width of the frontier markers
 SCAN_DEPTH = 50  # sweeps held for the executor: 10 s of a 5 Hz lidar
 ROBOTS_PERIOD_S = 0.5  # the robots' markers at most this often (a pose goes out at 2 Hz)
 ROBOT_MARKER_M = 0.35  # diameter of a robot's marker
+TF_PERIOD_S = 0.05  # map -> odom at most this often (20 Hz, as slam_toolbox's default)
+# map -> odom is stamped this far ahead, so a lookup at the newest odometry finds it
+# (slam_toolbox's transform_timeout and AMCL's transform_tolerance do the same)
+TF_AHEAD_S = 0.2
 
 
 def _stamp(header) -> float:
@@ -109,10 +115,25 @@ class Ros2Node:
         self._changed_at = time.time()
         self._last_map_s = -math.inf
         self.maps_published = 0
+        self.tf = self._tf_link(io)
+        self._last_tf_s = -math.inf
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name="ros2-node", daemon=True)
         self._thread.start()
+
+    def _tf_link(self, io):
+        """The tf participant, or None (said once) without Cyclone DDS."""
+        from agents.ros2_tf import TfLink
+
+        try:
+            return TfLink(io.domain_id, io.key(io.tf_key), io.key(io.tf_static_key), self._on_tf)
+        except ConfigError as e:
+            log.warning("no tf in or out: %s; the mount comes from [slam.mount]", e)
+            return None
+
+    def _on_tf(self, msg, topic: str) -> None:
+        self.frames.add_tf(msg, topic)
 
     def _spin(self) -> None:
         try:
@@ -136,6 +157,7 @@ class Ros2Node:
 
     def _on_odom(self, msg) -> None:
         self.frames.base_frame = msg.child_frame_id
+        self.frames.odom_frame = msg.header.frame_id
         p, t = msg.pose.pose, msg.twist.twist
         odom = Odometry(p.position.x, p.position.y, _yaw(p.orientation), t.linear.x, t.angular.z)
         self.bus.inject(self.odom_topic, _stamp(msg.header), odom)
@@ -157,6 +179,22 @@ class Ros2Node:
     def names(self) -> list[str]:
         """The nodes this node sees in its graph (``ros2 node list``)."""
         return [f"{ns.rstrip('/')}/{n}" for n, ns in self.node.get_node_names_and_namespaces()]
+
+    def publish_map_to_odom(self, pose, odom, force: bool = False) -> bool:
+        """The map frame -> the odometry's frame on tf, from the robot's pose in the map
+        and its odometry pose at the same time (x m, y m, yaw rad), at most every
+        ``TF_PERIOD_S``; whether it was sent (not before odometry named its frame)."""
+        from polyswarm.se2 import compose, inverse
+
+        now = time.time()
+        if self.tf is None or not self.frames.odom_frame or odom is None:
+            return False
+        if not force and now - self._last_tf_s < TF_PERIOD_S:
+            return False
+        self._last_tf_s = now
+        map_to_odom = compose(np.asarray(pose, float), inverse(np.asarray(odom, float)))
+        self.tf.publish(self.io.map_frame, self.frames.odom_frame, map_to_odom, now + TF_AHEAD_S)
+        return True
 
     def publish_map(self, pmap, target=None, force: bool = False) -> bool:
         """Publish ``pmap`` on ``map`` (and its frontiers) if it changed and the last
@@ -276,6 +314,8 @@ class Ros2Node:
         return MarkerArray(markers=out)
 
     def close(self) -> None:
+        if self.tf is not None:
+            self.tf.close()
         try:
             self.executor.shutdown(timeout_sec=1.0)
             self.node.destroy_node()

@@ -26,37 +26,45 @@ from protocols import rmw_zenoh as rz
 from protocols import ros
 from protocols.keys import RobotKeys
 from protocols.messages import Assignment, CmdVel, Odometry, Scan
-from protocols.tf import Mount2D, mount_from_tf
+from protocols.tf import TF, TF_STATIC, MountSources, mount_from_tf
 
 log = logging.getLogger(__name__)
 
 NODE_NAME = "polyswarm_agent"
+MAX_TF_MESSAGES = 500  # per topic: /tf at 50 Hz for 10 s before the frames are known
 
 
 class RosFrames:
-    """The frames a robot's messages name and its /tf_static: the lidar's mount once the
-    scan's frame, the odometry's child frame and a tf path between them are known.
-    Fed from Zenoh's threads."""
+    """The frames a robot's messages name and its tf: the lidar's mount once the scan's
+    frame, the odometry's child frame and a tf path between them are known (from
+    /tf_static, else from /tf: ``protocols.tf.MountSources``). Fed from the sources'
+    threads."""
 
     def __init__(self) -> None:
         self.scan_frame = ""
         self.base_frame = ""
-        self._tf: list = []
+        self.odom_frame = ""  # the odometry's own frame (its header's)
+        self._tf: dict[str, list] = {TF_STATIC: [], TF: []}
         self._lock = threading.Lock()
         self._done = False
 
-    def add_tf(self, msg) -> None:
+    def add_tf(self, msg, topic: str = TF_STATIC) -> None:
+        """A TFMessage read on ``topic`` (/tf_static or /tf); /tf's only until the mount
+        is known (it carries the moving odom -> base transform many times a second)."""
         with self._lock:
-            self._tf.append(msg)
+            if topic == TF_STATIC or not self._done:
+                self._tf[topic] = [*self._tf[topic][-MAX_TF_MESSAGES + 1 :], msg]
 
-    def mount(self) -> Mount2D | None:
-        """The mount, once (None before it is known, and after it was returned)."""
+    def mount(self) -> MountSources | None:
+        """The mount as each topic gives it, once (None before it is known, and after it
+        was returned)."""
         with self._lock:
-            if self._done or not (self._tf and self.scan_frame and self.base_frame):
+            if self._done or not (self.scan_frame and self.base_frame):
                 return None
-            found = mount_from_tf(self._tf, self.base_frame, self.scan_frame)
-            self._done = found is not None
-            return found
+            base, scan = self.base_frame, self.scan_frame
+            found = MountSources(*(mount_from_tf(self._tf[t], base, scan) for t in (TF_STATIC, TF)))
+            self._done = found.best()[0] is not None
+            return found if self._done else None
 
 
 def subscribe_sensors(bus, me: RobotKeys, io: AgentIoConfig, frames: RosFrames) -> list[str]:

@@ -445,6 +445,9 @@ class AgentIoConfig:
     scan_key: str = "{ns}/scan"
     odom_key: str = "{ns}/odom"
     tf_static_key: str = "{ns}/tf_static"  # the lidar's mount, unless [slam.mount] sets one
+    # source "ros2-node": the mount from here too (as ROS 1 setups publish it), and the
+    # map -> odom transform out
+    tf_key: str = "{ns}/tf"
     cmd_vel_key: str = "{ns}/cmd_vel"
     goal_key: str = "{ns}/goal_pose"
     map_frame: str = "map"  # frame id of goals sent to the robot's navigation stack
