@@ -140,6 +140,17 @@ class AgentNode:
             cfg.agent.output,
         )
 
+    def _nav2_outcome(self) -> None:
+        """Nav2's word on the goal: it reached it, or it failed (the coordinator told)."""
+        done = self.ros_node.nav.outcome()
+        a = self.agent.assignment
+        if done is None or a is None or a.target != done.target:
+            return
+        from agents.ros2_action import GoalState
+
+        if done.state != GoalState.CANCELED:  # canceled: by us, for the next goal
+            self.agent.behaviour.on_nav_result(done.state == GoalState.SUCCEEDED, done.detail)
+
     def step(self, stop: threading.Event) -> None:
         agent = self.agent
         agent.use_tf_mount(self.frames.mount())
@@ -164,6 +175,8 @@ class AgentNode:
             self.ros_node.publish_map(agent.planning_map, agent.target_xy)
             self.ros_node.publish_robots(agent.id, agent.pose, agent.path_left(), agent.peers)
             self.ros_node.publish_map_to_odom(agent.pose, agent.slam.odom)
+            if self.ros_node.nav is not None:
+                self._nav2_outcome()
         if self.need_merged and agent.in_shared_frame:
             self._fetch_merged()
 
@@ -212,7 +225,7 @@ class AgentNode:
 
     def _assigned(self, a: Assignment, stamp_s: float) -> None:
         self.agent.on_assignment(a, stamp_s)
-        self.sink.assignment(self.agent.assignment, stamp_s)
+        self.sink.assignment(self.agent.assignment, stamp_s, self.agent.pose)
 
     def _coordinator_status(self, msg: CoordinatorStatus, stamp_s: float) -> None:
         held = self.leader.heard(msg)
@@ -310,7 +323,7 @@ def _send(
             kind = MAP_KIND_OF[what]
             sent += bus.publish_map(me.map_delta, kind, payload, base, ver, stamp_s)
     if out.assignment is not None:
-        sink.assignment(out.assignment, stamp_s)
+        sink.assignment(out.assignment, stamp_s, agent.pose)
     if out.pose is not None:
         sent += bus.publish(me.pose, out.pose, stamp_s)
     if out.status is not None:

@@ -126,6 +126,7 @@ class Behaviour:
         self._turn_until: float | None = None
         self._last_plan = -math.inf
         self._fail_since: float | None = None
+        self._nav_gave_up = False  # the robot's Nav2 aborted the goal
         self._best_remaining = math.inf
         self._progress_t = 0.0
         self._blocked_since: float | None = None
@@ -166,6 +167,7 @@ class Behaviour:
         log.info("%s: assignment %s %d at (%.1f, %.1f)", self.id, a.kind, a.target, *a.goal)
         self.follower.set_path(None)
         self._fail_since = None
+        self._nav_gave_up = False
         self._recoveries.clear()  # counted per assignment: given again later, tried again
         if self.mode == Mode.START_TURN:
             return  # planned once the turn is done
@@ -174,6 +176,17 @@ class Behaviour:
             return
         self._set(Mode.NAVIGATE)
         self._plan(now, pose)
+
+    def on_nav_result(self, reached: bool, why: str) -> None:
+        """The robot's own navigation stack (Nav2) reached the goal, or gave up on it."""
+        if self.assignment is None or self.mode not in (Mode.NAVIGATE, Mode.RECOVER, Mode.YIELD):
+            return
+        if reached:
+            self._arrived()
+        else:
+            self.follower.set_path(None)
+            self._nav_gave_up = True  # no replanning brings it back: Nav2 tried
+            self._set(Mode.UNREACHABLE, why)
 
     def on_peer(self, rid: str, now: float, xy: np.ndarray, blocked_by: str, pose) -> None:
         self.peers[rid] = (now, np.asarray(xy, dtype=float))
@@ -217,6 +230,8 @@ class Behaviour:
         return (0.0, 0.0)
 
     def _navigate(self, now: float, pose, scan_xy, moving):
+        if self._nav_gave_up:
+            return (0.0, 0.0)
         due = now - self._last_plan >= REPLAN_PERIOD_S
         retry = self.follower.path is None and now - self._last_plan >= PLAN_RETRY_S
         if due or retry:

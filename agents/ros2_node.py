@@ -15,6 +15,9 @@ With rclpy installed (a ROS 2 installation, or ROS 2 Jazzy's packages from PyPI:
   packages on PyPI): the lidar's mount from ``tf_static``, else ``tf``; out on ``tf``
   the map frame -> the odometry's frame, so RViz and Nav2 see the robot in the map
   polyswarm publishes.
+* output ``nav2``: goals through Nav2's ``navigate_to_pose`` action
+  (``agents.ros2_action``); success ends the target, an abort tells the coordinator it
+  failed, a new assignment cancels the goal before.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import time
 
 import numpy as np
 
+from polyswarm.config import CommandOutput
 from polyswarm.errors import ConfigError
 from polyswarm.polymap import VectorType
 from polyswarm.slam.scan import LaserScan
@@ -116,6 +120,11 @@ class Ros2Node:
         self._last_map_s = -math.inf
         self.maps_published = 0
         self.tf = self._tf_link(io)
+        self.nav = None  # output "nav2": agents.ros2_action.Nav2Goals
+        if io.output == CommandOutput.NAV2:
+            from agents.ros2_action import Nav2Goals
+
+            self.nav = Nav2Goals(io.domain_id, io.key(io.nav2_action_key), io.map_frame)
         self._last_tf_s = -math.inf
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -316,6 +325,8 @@ class Ros2Node:
     def close(self) -> None:
         if self.tf is not None:
             self.tf.close()
+        if self.nav is not None:
+            self.nav.close()
         try:
             self.executor.shutdown(timeout_sec=1.0)
             self.node.destroy_node()

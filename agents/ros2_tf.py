@@ -3,7 +3,7 @@
 tf2_msgs (the type of ``/tf``) is not among the ROS 2 packages on PyPI, so rclpy cannot
 create its publishers or subscriptions. This module speaks it on the robot's DDS domain
 directly, with Cyclone DDS's Python binding (``pip install cyclonedds``): the types of
-``agents.tf_types`` are tf2_msgs/TFMessage and its parts under the names ROS 2 gives them in DDS
+``agents.dds_types`` are tf2_msgs/TFMessage and its parts under the names ROS 2 gives them in DDS
 (``tf2_msgs::msg::dds_::TFMessage_`` on the topic ``rt/tf``), in plain CDR, so Fast DDS
 and Cyclone DDS nodes of the robot (tf2, RViz, Nav2) read and write them as their own.
 
@@ -33,7 +33,7 @@ POLL_S = 0.05  # the reader thread's wait for data, seconds (it also watches for
 
 def transform_stamped(parent: str, child: str, pose, stamp_s: float):
     """A geometry_msgs/TransformStamped of ``child`` in ``parent``: (x m, y m, yaw rad)."""
-    from agents.tf_types import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+    from agents.dds_types import Header, Quaternion, Time, Transform, TransformStamped, Vector3
 
     x, y, yaw = (float(v) for v in pose)
     sec = math.floor(stamp_s)
@@ -62,7 +62,7 @@ class TfLink:
             from cyclonedds.sub import DataReader
             from cyclonedds.topic import Topic
 
-            from agents.tf_types import TFMessage
+            from agents.dds_types import TFMessage
         except ImportError as e:
             raise ConfigError(
                 "tf in the robot's ROS 2 graph needs Cyclone DDS's Python binding: "
@@ -92,7 +92,7 @@ class TfLink:
 
     def publish(self, parent: str, child: str, pose, stamp_s: float) -> None:
         """``child`` in ``parent`` (x m, y m, yaw rad) on ``/tf``, stamped ``stamp_s``."""
-        from agents.tf_types import TFMessage
+        from agents.dds_types import TFMessage
 
         self.writer.write(TFMessage([transform_stamped(parent, child, pose, stamp_s)]))
         self.published += 1

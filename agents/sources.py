@@ -17,6 +17,7 @@ the same for every source. The lidar's mount is read from /tf_static (``RosFrame
 from __future__ import annotations
 
 import logging
+import math
 import os
 import threading
 import time
@@ -178,11 +179,27 @@ class CommandSink:
         elif out == CommandOutput.TWIST:
             self._put(self.io.cmd_vel_key, ros.TWIST, ros.encode_twist(v_mps, w_radps))
 
-    def assignment(self, a: Assignment | None, stamp_s: float) -> None:
-        """In ``goal`` mode, each new assignment goes to the robot's navigation stack."""
-        if self.io.output != CommandOutput.GOAL or a is None or a.target == self._goal_target:
+    def assignment(self, a: Assignment | None, stamp_s: float, pose=None) -> None:
+        """In ``goal`` and ``nav2`` modes, each new assignment goes to the robot's
+        navigation stack (``pose``: the robot's, to face the goal from it)."""
+        goals = (CommandOutput.GOAL, CommandOutput.NAV2)
+        if self.io.output not in goals or a is None or a.target == self._goal_target:
             return
         self._goal_target = a.target
+        if self.io.output == CommandOutput.NAV2:
+            self._nav2(a, stamp_s, pose)
+            return
         data = ros.encode_goal(a.goal, stamp_s, self.io.map_frame)
         self._put(self.io.goal_key, ros.POSE_STAMPED, data, reliable=True)
         log.info("goal (%.2f, %.2f) sent to the navigation stack", *a.goal)
+
+    def _nav2(self, a: Assignment, stamp_s: float, pose) -> None:
+        from protocols.messages import AssignmentKind
+
+        nav = self.ros2.nav
+        if a.kind == AssignmentKind.STOP:
+            nav.stop()
+            return
+        x, y = (0.0, 0.0) if pose is None else (float(pose[0]), float(pose[1]))
+        yaw = math.atan2(a.goal[1] - y, a.goal[0] - x)  # facing the way it came to look
+        nav.navigate(a.target, a.goal, yaw, stamp_s)

@@ -289,7 +289,10 @@ def validate(cfg: Config) -> None:
     _choice(cfg.agent.source, SensorSource, "agent.source")
     _choice(cfg.agent.output, CommandOutput, "agent.output")
     _choice(cfg.slam.submap.reference, IcpReference, "slam.submap.reference")
-    for name in ("scan_key", "odom_key", "tf_static_key", "tf_key", "cmd_vel_key", "goal_key"):
+    if cfg.agent.output == CommandOutput.NAV2 and cfg.agent.source != SensorSource.ROS2_NODE:
+        raise ConfigError('agent.output = "nav2" needs agent.source = "ros2-node"')
+    keys = ("scan_key", "odom_key", "tf_static_key", "tf_key", "cmd_vel_key", "goal_key")
+    for name in (*keys, "nav2_action_key"):
         key = cfg.agent.key(getattr(cfg.agent, name))
         if not key or any(ch in key for ch in "*$?#") or "//" in key:
             raise ConfigError(f"agent.{name}: {key!r} is not a plain Zenoh key")

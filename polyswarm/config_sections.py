@@ -425,6 +425,9 @@ class CommandOutput(StrEnum):
     NATIVE = "native"  # polyswarm CmdVel messages (the simulator)
     TWIST = "twist"  # geometry_msgs/Twist CDR on cmd_vel_key
     GOAL = "goal"  # geometry_msgs/PoseStamped of the assigned goal on goal_key (own nav stack)
+    # source "ros2-node": Nav2's navigate_to_pose action (nav2_action_key); its outcome
+    # ends the target or tells the coordinator it failed
+    NAV2 = "nav2"
     NONE = "none"  # drive nothing (log replay, mapping only)
 
 
@@ -450,6 +453,7 @@ class AgentIoConfig:
     tf_key: str = "{ns}/tf"
     cmd_vel_key: str = "{ns}/cmd_vel"
     goal_key: str = "{ns}/goal_pose"
+    nav2_action_key: str = "{ns}/navigate_to_pose"  # output "nav2": Nav2's action
     map_frame: str = "map"  # frame id of goals sent to the robot's navigation stack
     # output "twist": no translation towards a return closer than this beyond the robot's
     # body (metres; the controller keeps 0.03 m more), and the speed limits (0: the

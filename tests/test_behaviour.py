@@ -145,3 +145,22 @@ def test_the_trail_moves_with_the_frame_when_the_robot_is_anchored():
         b._record_trail(np.array([x, 0.0, 0.0]))
     b.move_frame((10.0, 5.0, math.pi / 2))  # the old frame's origin at (10, 5), turned left
     assert np.allclose(list(b._trail), [(10.0, 5.0), (10.0, 6.0), (10.0, 7.0)])
+
+
+def test_nav2_giving_up_hands_the_target_back_until_the_next_one_and_success_looks_first():
+    b = behaviour()
+    goal = Assignment(AssignmentKind.EXPLORE, 5, (3.0, 0.0), ((4.0, 1.0), (4.0, 3.0)))
+    b.on_assignment(goal, 0.0, np.zeros(3))
+    b.on_nav_result(False, "Nav2 aborted")
+    assert b.mode == Mode.UNREACHABLE and b.state == RobotState.UNREACHABLE
+    _, seen = drive(b, np.zeros(3), 5.0)  # no replanning takes it back: Nav2 tried
+    assert {m for _, _, m in seen} == {Mode.UNREACHABLE}
+    b.on_assignment(Assignment(AssignmentKind.EXPLORE, 6, (0.0, 2.0), ()), 6.0, np.zeros(3))
+    assert b.mode == Mode.NAVIGATE
+    b.on_nav_result(True, "Nav2 succeeded")
+    assert b.mode == Mode.REACHED  # no frontier to look at
+    b.on_assignment(goal, 7.0, np.zeros(3))
+    b.on_nav_result(True, "Nav2 succeeded")
+    assert b.mode == Mode.LOOK  # then it turns to the frontier before reporting
+    b.on_nav_result(False, "late word on an old goal")
+    assert b.mode == Mode.LOOK

@@ -73,7 +73,7 @@ class RobotTf:
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
-        from agents.tf_types import TFMessage, TransformStamped
+        from agents.dds_types import TFMessage, TransformStamped
 
         cdr = Policy.DataRepresentation(use_cdrv0_representation=True)
         latched = Qos(
@@ -171,7 +171,7 @@ def test_the_agent_node_reads_the_mount_from_tf_static_and_publishes_map_to_odom
 
 
 def _tf(*transforms):
-    from agents.tf_types import TFMessage
+    from agents.dds_types import TFMessage
 
     return TFMessage([transform_stamped(*t) for t in transforms])
 
