@@ -21,6 +21,7 @@ import math
 import os
 import threading
 import time
+from collections import deque
 
 from polyswarm.config import AgentIoConfig, CommandOutput, SensorSource
 from protocols import rmw_zenoh as rz
@@ -45,7 +46,7 @@ class RosFrames:
         self.scan_frame = ""
         self.base_frame = ""
         self.odom_frame = ""  # the odometry's own frame (its header's)
-        self._tf: dict[str, list] = {TF_STATIC: [], TF: []}
+        self._tf = {t: deque(maxlen=MAX_TF_MESSAGES) for t in (TF_STATIC, TF)}
         self._lock = threading.Lock()
         self._done = False
 
@@ -54,7 +55,7 @@ class RosFrames:
         is known (it carries the moving odom -> base transform many times a second)."""
         with self._lock:
             if topic == TF_STATIC or not self._done:
-                self._tf[topic] = [*self._tf[topic][-MAX_TF_MESSAGES + 1 :], msg]
+                self._tf[topic].append(msg)
 
     def mount(self) -> MountSources | None:
         """The mount as each topic gives it, once (None before it is known, and after it
