@@ -257,6 +257,8 @@ class Coordinator(RobotMaps, MergeSchedule, TargetAllocation):
         info = self.robot(rid)
         if info.alive != alive:
             log.info("robot %s %s", rid, "joined" if alive else "left")
+            if alive and info.left_t is not None:  # back from out of range: behind until
+                info.behind_since = self.now  # its first pose says which map it has
             info.alive = alive
             home = info.status is not None and info.status.state == RobotState.HOME
             info.left_t = self.now if not alive and not home and info.pose is not None else None

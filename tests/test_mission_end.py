@@ -65,6 +65,8 @@ def test_a_robot_out_of_range_before_it_was_home_holds_the_end_of_the_mission():
     c.cycle()
     assert c.state == MissionState.RETURNING
     c.on_alive("r2", True)  # back in range: its map is fetched, then handed over
+    c.cycle()  # a cycle between its liveliness and its first pose (office seed 0 ended here)
+    assert c.state == MissionState.RETURNING
     c.on_pose("r2", c.now, Pose(3.0, 1.0, 0.0, 4))
     c.now += 1.0
     c.cycle()

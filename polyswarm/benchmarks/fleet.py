@@ -131,8 +131,10 @@ def cuts(
                     "final_coverage": m["final_coverage"],
                     "t99_s": m["t99_s"],
                     "map_iou": m["map_iou"],
-                    "keyframes_while_cut": {
-                        o["robot"]: (o["keyframes_at_rejoin"] or 0) - o["keyframes_at_cut"]
+                    "keyframes_while_cut": {  # None: its return was never seen
+                        o["robot"]: None
+                        if o["keyframes_at_rejoin"] is None
+                        else o["keyframes_at_rejoin"] - o["keyframes_at_cut"]
                         for o in m["link_outages"]
                     },
                     "maps_agree": all(v["agree"] for v in m["maps_agree"].values()),

@@ -49,7 +49,10 @@ def bench_fleet(
                 f"{100 * r['final_coverage']:.1f} %, "
                 + ("never" if r["t99_s"] is None else f"{r['t99_s']:.0f} s")
                 + ", "
-                + ", ".join(f"{k} {n}" for k, n in r["keyframes_while_cut"].items()),
+                + ", ".join(
+                    f"{k} {'(no return seen)' if n is None else n}"
+                    for k, n in r["keyframes_while_cut"].items()
+                ),
             )
             for r in res["runs"]
         ]
