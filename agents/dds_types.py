@@ -8,6 +8,7 @@ Imports cyclonedds: import this module only where it is installed. (No postponed
 annotations here: Cyclone DDS resolves the field types from this module's names.)
 """
 
+import math
 from dataclasses import dataclass
 
 import cyclonedds.idl.annotations as annotate
@@ -31,6 +32,12 @@ from cyclonedds.idl.types import (
 class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
     sec: int32
     nanosec: uint32
+
+
+def time_of(t_s: float) -> Time:
+    """builtin_interfaces/Time of ``t_s`` seconds."""
+    sec = math.floor(t_s)
+    return Time(sec, min(int((t_s - sec) * 1e9), 999_999_999))
 
 
 @dataclass

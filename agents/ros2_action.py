@@ -74,14 +74,6 @@ def navigate_to_pose() -> ActionTypes:
     )
 
 
-def stamp_of(t_s: float):
-    """builtin_interfaces/Time of ``t_s`` seconds."""
-    from agents.dds_types import Time
-
-    sec = int(t_s // 1)
-    return Time(sec, min(int((t_s - sec) * 1e9), 999_999_999))
-
-
 class ActionClient:
     """The client end of the action ``name`` (a topic name without the leading slash)."""
 
@@ -133,9 +125,9 @@ class ActionClient:
 
     def cancel(self, gid: bytes) -> None:
         """Ask the server to cancel goal ``gid`` (its status then says canceled)."""
-        from agents.dds_types import UUID, CancelGoalRequest, GoalInfo
+        from agents.dds_types import UUID, CancelGoalRequest, GoalInfo, time_of
 
-        self._cancel.write(CancelGoalRequest(GoalInfo(UUID(list(gid)), stamp_of(0.0))))
+        self._cancel.write(CancelGoalRequest(GoalInfo(UUID(list(gid)), time_of(0.0))))
 
     def state(self, gid: bytes) -> GoalState | None:
         return self.goals.get(gid)
@@ -204,12 +196,13 @@ class Nav2Goals:
             Pose,
             PoseStamped,
             Quaternion,
+            time_of,
         )
 
         self.stop()
         q = Quaternion(0.0, 0.0, math.sin(yaw_rad / 2), math.cos(yaw_rad / 2))
         pose = Pose(Point(float(goal_xy[0]), float(goal_xy[1]), 0.0), q)
-        goal = NavigateToPoseGoal(PoseStamped(Header(stamp_of(stamp_s), self.map_frame), pose), "")
+        goal = NavigateToPoseGoal(PoseStamped(Header(time_of(stamp_s), self.map_frame), pose), "")
         self._pending = (target, goal)
         self._flush()
 

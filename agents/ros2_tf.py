@@ -3,9 +3,10 @@
 tf2_msgs (the type of ``/tf``) is not among the ROS 2 packages on PyPI, so rclpy cannot
 create its publishers or subscriptions. This module speaks it on the robot's DDS domain
 directly, with Cyclone DDS's Python binding (``pip install cyclonedds``): the types of
-``agents.dds_types`` are tf2_msgs/TFMessage and its parts under the names ROS 2 gives them in DDS
-(``tf2_msgs::msg::dds_::TFMessage_`` on the topic ``rt/tf``), in plain CDR, so Fast DDS
-and Cyclone DDS nodes of the robot (tf2, RViz, Nav2) read and write them as their own.
+``agents.dds_types`` are tf2_msgs/TFMessage and its parts under the names ROS 2 gives
+them in DDS (``tf2_msgs::msg::dds_::TFMessage_`` on the topic ``rt/tf``), in plain CDR,
+so Fast DDS and Cyclone DDS nodes of the robot (tf2, RViz, Nav2) read and write them as
+their own.
 
     link = TfLink(domain_id, "tb3_1/tf", "tb3_1/tf_static", on_tf)
     link.publish("map", "odom", (x, y, yaw), stamp_s)   # map -> odom
@@ -33,12 +34,11 @@ POLL_S = 0.05  # the reader thread's wait for data, seconds (it also watches for
 
 def transform_stamped(parent: str, child: str, pose, stamp_s: float):
     """A geometry_msgs/TransformStamped of ``child`` in ``parent``: (x m, y m, yaw rad)."""
-    from agents.dds_types import Header, Quaternion, Time, Transform, TransformStamped, Vector3
+    from agents.dds_types import Header, Quaternion, Transform, TransformStamped, Vector3, time_of
 
     x, y, yaw = (float(v) for v in pose)
-    sec = math.floor(stamp_s)
     return TransformStamped(
-        Header(Time(sec, min(int((stamp_s - sec) * 1e9), 999_999_999)), parent),
+        Header(time_of(stamp_s), parent),
         child,
         Transform(Vector3(x, y, 0.0), Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))),
     )
