@@ -25,6 +25,8 @@ import time
 from dataclasses import dataclass
 from enum import StrEnum
 
+from polyswarm.errors import ConfigError
+
 log = logging.getLogger(__name__)
 
 TAKE_MAX = 64  # samples taken from a reader per poll
@@ -177,8 +179,13 @@ class Nav2Goals:
     the one before canceled; sent once the server is there."""
 
     def __init__(self, domain_id: int, action_key: str, map_frame: str) -> None:
-        from cyclonedds.domain import DomainParticipant
-
+        try:
+            from cyclonedds.domain import DomainParticipant
+        except ImportError as e:
+            raise ConfigError(
+                'agent.output = "nav2" needs Cyclone DDS\'s Python binding: '
+                "pip install 'polyswarm[ros2]'"
+            ) from e
         self.participant = DomainParticipant(domain_id)
         self.client = ActionClient(self.participant, action_key, navigate_to_pose())
         self.map_frame = map_frame

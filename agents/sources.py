@@ -24,11 +24,12 @@ import time
 from collections import deque
 
 from polyswarm.config import AgentIoConfig, CommandOutput, SensorSource
+from polyswarm.errors import DataFormatError
 from protocols import rmw_zenoh as rz
 from protocols import ros
 from protocols.keys import RobotKeys
 from protocols.messages import Assignment, CmdVel, Odometry, Scan
-from protocols.tf import TF, TF_STATIC, MountSources, mount_from_tf
+from protocols.tf import TF, TF_STATIC, Mount2D, MountSources, mount_from_tf
 
 log = logging.getLogger(__name__)
 
@@ -63,10 +64,19 @@ class RosFrames:
         with self._lock:
             if self._done or not (self.scan_frame and self.base_frame):
                 return None
-            base, scan = self.base_frame, self.scan_frame
-            found = MountSources(*(mount_from_tf(self._tf[t], base, scan) for t in (TF_STATIC, TF)))
+            found = MountSources(*(self._mount_on(t) for t in (TF_STATIC, TF)))
             self._done = found.best()[0] is not None
             return found if self._done else None
+
+    def _mount_on(self, topic: str) -> Mount2D | None:
+        """The mount as ``topic``'s messages give it; a bad tree (a loop, a rotation that
+        is no quaternion) is said and its messages dropped."""
+        try:
+            return mount_from_tf(self._tf[topic], self.base_frame, self.scan_frame)
+        except DataFormatError as e:
+            log.warning("%s: %s; its messages so far are dropped", topic, e)
+            self._tf[topic].clear()
+            return None
 
 
 def subscribe_sensors(bus, me: RobotKeys, io: AgentIoConfig, frames: RosFrames) -> list[str]:

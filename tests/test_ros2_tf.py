@@ -195,3 +195,10 @@ def test_a_robots_frames_give_the_mount_from_tf_static_else_from_tf():
     found = both.mount()
     assert found.best()[1] == TF_STATIC and found.best()[0].x_m == pytest.approx(0.1)
     assert "disagree" in found.disagreement()
+    loop = RosFrames()  # a tf loop on /tf: said, dropped, and /tf_static still read
+    loop.scan_frame, loop.base_frame = "laser", "base_link"
+    loop.add_tf(_tf(("a", "b", (0, 0, 0), 1.0), ("b", "a", (0, 0, 0), 1.0)), TF)
+    loop.add_tf(_tf(("a", "laser", (0, 0, 0), 1.0)), TF)  # laser -> a -> b -> a ...
+    assert loop.mount() is None
+    loop.add_tf(_tf(("base_link", "laser", MOUNT, 0.0)), TF_STATIC)
+    assert loop.mount().best()[1] == TF_STATIC
