@@ -168,6 +168,8 @@ class Nav2StandIn:
         t = self.t
         while not self._stop.wait(0.02):
             for req in self.requests.take(N=10):
+                if not hasattr(req, "goal_id"):  # a client gone, not a request
+                    continue
                 gid = bytes(req.goal_id.uuid)
                 self.received.append(req.goal)
                 self.replies.write(t.NavigateToPoseSendGoalResponse(True, t.Time(0, 0)))
@@ -178,6 +180,8 @@ class Nav2StandIn:
                 self.feedback.write(t.NavigateToPoseFeedbackMessage(req.goal_id, fb))
                 self._publish()
             for c in self.cancels.take(N=10):
+                if not hasattr(c, "goal_info"):
+                    continue
                 g = self.goals.get(bytes(c.goal_info.goal_id.uuid))
                 if g is not None and g[1] == 2:
                     g[1] = 5  # canceled
