@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -348,3 +350,47 @@ def anchoring_ticks(frames, main, now: float, until, wall_s: float = 120.0) -> t
         now += 1.0
         time.sleep(0.02)
     return sent, now
+
+
+# --- a real ROS 2 graph (rclpy and Fast DDS from PyPI) ------------------------------------
+
+
+@contextmanager
+def rclpy_node(domain: int, name: str, namespace: str):
+    """A real rclpy node on DDS domain ``domain``, spun on a thread of its own."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node(name, namespace=namespace, context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    threading.Thread(target=executor.spin, daemon=True).start()
+    try:
+        yield node
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        ctx.shutdown()
+
+
+@contextmanager
+def agent_on_a_thread(rid: str, cfg, start_pose):
+    """``run_agent`` on a thread, beside a Zenoh router of its own: yields a dict that
+    holds the agent (``"agent"``) once it returned; stopped and joined on exit."""
+    from agents.agent_node import run_agent
+    from agents.session import SessionSpec, open_session
+
+    endpoint, stop, result = free_endpoint(), threading.Event(), {}
+    with open_session(SessionSpec.router(endpoint)):
+        client = SessionSpec.client(endpoint)
+        thread = threading.Thread(
+            target=lambda: result.update(agent=run_agent(rid, cfg, start_pose, client, stop))
+        )
+        thread.start()
+        try:
+            yield result
+        finally:
+            stop.set()
+            thread.join(timeout=20)

@@ -9,32 +9,21 @@ from __future__ import annotations
 import dataclasses
 import math
 import random
-import socket
-import threading
 import time
 
 import numpy as np
-import rclpy
 from nav_msgs.msg import OccupancyGrid
 from nav_msgs.msg import Odometry as RosOdometry
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan as RosLaserScan
 from visualization_msgs.msg import MarkerArray
 
-from agents.agent_node import run_agent
-from agents.session import SessionSpec, open_session
 from polyswarm.config import AgentIoConfig, Config
 from polyswarm.evaluation.maps import map_iou
 from polyswarm.grids.convert import polymap_to_grid
 from polyswarm.runners.slam import run_bag
 from protocols.bags import read_bag
-
-
-def _endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+from tests.conftest import agent_on_a_thread, rclpy_node
 
 
 def _time(msg, t: float) -> None:
@@ -115,48 +104,23 @@ def test_a_real_recording_played_into_ros2_is_mapped_by_the_agent_node(shared_da
     io = AgentIoConfig(source="ros2-node", output="none", namespace="neato", domain_id=domain)
     cfg = dataclasses.replace(used, agent=io)
 
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    player = rclpy.create_node("recording_player", namespace="/neato", context=ctx)
-    scan_pub = player.create_publisher(RosLaserScan, "scan", qos_profile_sensor_data)
-    odom_pub = player.create_publisher(RosOdometry, "odom", 50)
     maps: list[tuple[float, OccupancyGrid]] = []
+    robots: list[MarkerArray] = []
     latched = QoSProfile(
         depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
     )
-    player.create_subscription(
-        OccupancyGrid, "map", lambda m: maps.append((time.monotonic(), m)), latched
-    )
-    robots: list[MarkerArray] = []
-    player.create_subscription(MarkerArray, "polyswarm/robots", robots.append, 10)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(player)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-
-    endpoint = _endpoint()
-    stop, result = threading.Event(), {}
-    try:
-        with open_session(SessionSpec.router(endpoint)):
-            agent_thread = threading.Thread(
-                target=lambda: result.update(
-                    agent=run_agent(
-                        "r1", cfg, offline.odometry[0], SessionSpec.client(endpoint), stop
-                    )
-                )
-            )
-            agent_thread.start()
+    with rclpy_node(domain, "recording_player", "/neato") as player:
+        scan_pub = player.create_publisher(RosLaserScan, "scan", qos_profile_sensor_data)
+        odom_pub = player.create_publisher(RosOdometry, "odom", 50)
+        player.create_subscription(
+            OccupancyGrid, "map", lambda m: maps.append((time.monotonic(), m)), latched
+        )
+        player.create_subscription(MarkerArray, "polyswarm/robots", robots.append, 10)
+        with agent_on_a_thread("r1", cfg, offline.odometry[0]) as result:
             nodes = _wait_for_agent(player, scan_pub, odom_pub, "/neato/polyswarm_agent_r1")
             assert "/neato/polyswarm_agent_r1" in nodes, nodes  # as `ros2 node list` shows it
             _play(bag, scan_pub, odom_pub)
             _until_quiet(maps)
-            stop.set()
-            agent_thread.join(timeout=20)
-    finally:
-        stop.set()
-        executor.shutdown(timeout_sec=1.0)
-        player.destroy_node()
-        ctx.shutdown()
     agent = result["agent"]
     assert agent.stats.scans >= 0.95 * len(bag.scans) and agent.stats.refused == 0
     # the map `polyswarm slam` makes of the recording offline

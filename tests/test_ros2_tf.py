@@ -10,25 +10,20 @@ from __future__ import annotations
 import dataclasses
 import math
 import random
-import threading
 import time
 
 import numpy as np
 import pytest
-import rclpy
 from geometry_msgs.msg import TransformStamped as RosTransformStamped
 from nav_msgs.msg import Odometry as RosOdometry
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan as RosLaserScan
 
-from agents.agent_node import run_agent
 from agents.ros2_tf import dds_topic, transform_stamped
-from agents.session import SessionSpec, open_session
 from polyswarm.config import AgentIoConfig, Config
 from polyswarm.raycast import cast_rays
 from polyswarm.se2 import compose
-from tests.conftest import ANGLES, free_endpoint, room
+from tests.conftest import ANGLES, agent_on_a_thread, rclpy_node, room
 
 cyclonedds = pytest.importorskip("cyclonedds")
 
@@ -97,26 +92,13 @@ def test_the_agent_node_reads_the_mount_from_tf_static_and_publishes_map_to_odom
     io = AgentIoConfig(source="ros2-node", output="none", namespace=ns, domain_id=domain)
     cfg = dataclasses.replace(Config(), agent=io)  # no [slam.mount]: tf's must be used
     robot_tf = RobotTf(domain, ns)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    robot = rclpy.create_node("robot", namespace=f"/{ns}", context=ctx)
-    scan_pub = robot.create_publisher(RosLaserScan, "scan", qos_profile_sensor_data)
-    odom_pub = robot.create_publisher(RosOdometry, "odom", 50)
     probes: list = []
-    robot.create_subscription(RosTransformStamped, "probe", probes.append, 10)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(robot)
-    threading.Thread(target=executor.spin, daemon=True).start()
-    endpoint, stop, result = free_endpoint(), threading.Event(), {}
     received: list = []
-    try:
-        with open_session(SessionSpec.router(endpoint)):
-            agent_thread = threading.Thread(
-                target=lambda: result.update(
-                    agent=run_agent("r1", cfg, START, SessionSpec.client(endpoint), stop)
-                )
-            )
-            agent_thread.start()
+    with rclpy_node(domain, "robot", f"/{ns}") as robot:
+        scan_pub = robot.create_publisher(RosLaserScan, "scan", qos_profile_sensor_data)
+        odom_pub = robot.create_publisher(RosOdometry, "odom", 50)
+        robot.create_subscription(RosTransformStamped, "probe", probes.append, 10)
+        with agent_on_a_thread("r1", cfg, START) as result:
             deadline = time.monotonic() + 20.0
             while time.monotonic() < deadline and not (
                 scan_pub.get_subscription_count() and odom_pub.get_subscription_count()
@@ -134,13 +116,6 @@ def test_the_agent_node_reads_the_mount_from_tf_static_and_publishes_map_to_odom
             time.sleep(2.0)
             received += robot_tf.tf.take(N=100)
             topics = dict(robot.get_topic_names_and_types())
-            stop.set()
-            agent_thread.join(timeout=20)
-    finally:
-        stop.set()
-        executor.shutdown(timeout_sec=1.0)
-        robot.destroy_node()
-        ctx.shutdown()
     agent = result["agent"]
     # the mount came from tf_static: the scans lined up with the lidar facing backwards
     m = agent.slam.cfg.mount
